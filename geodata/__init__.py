@@ -1,0 +1,5 @@
+"""geodata: raw triangle meshes to exact geodesic (and biharmonic) training data in zarr stores."""
+from geodata.mesh import Mesh, MeshError
+
+__all__ = ["Mesh", "MeshError"]
+__version__ = "0.1.0"

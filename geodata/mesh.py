@@ -1,0 +1,122 @@
+"""The triangle mesh every stage takes and returns, and the invariants checked between stages."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["Mesh", "MeshError", "unique_edges", "edge_face_counts", "closed_manifold_problem",
+           "vertex_normals", "require_closed_manifold"]
+
+
+class MeshError(Exception):
+    """A mesh that a stage cannot (or must not) process; `reason` is one line for logs and the store."""
+
+    def __init__(self, stage: str, reason: str):
+        super().__init__(f"{stage}: {reason}")
+        self.stage = stage
+        self.reason = reason
+
+
+@dataclass(frozen=True)
+class Mesh:
+    """Plain arrays: vertices float64 (N, 3), faces int64 (F, 3)."""
+
+    vertices: np.ndarray
+    faces: np.ndarray
+
+    def __post_init__(self):
+        object.__setattr__(self, "vertices", np.ascontiguousarray(self.vertices, dtype=np.float64))
+        object.__setattr__(self, "faces", np.ascontiguousarray(self.faces, dtype=np.int64))
+
+    @property
+    def n_vertices(self) -> int:
+        return len(self.vertices)
+
+    @property
+    def n_faces(self) -> int:
+        return len(self.faces)
+
+
+def unique_edges(faces: np.ndarray) -> np.ndarray:
+    """Unique undirected edges (E, 2) with e[:, 0] < e[:, 1], sorted lexicographically."""
+    e = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    return np.unique(e, axis=0)
+
+
+def edge_face_counts(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unique undirected edges and how many faces contain each."""
+    e = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    return np.unique(e, axis=0, return_counts=True)
+
+
+def closed_manifold_problem(mesh: Mesh) -> str | None:
+    """Why `mesh` is not a closed, edge-manifold, consistently oriented, vertex-manifold surface; None if it is.
+
+    The exact-geodesic libraries segfault on non-manifold edges, so this runs before every native call.
+    """
+    v, f = mesh.vertices, mesh.faces
+    if len(f) == 0:
+        return "no faces"
+    if not np.isfinite(v).all():
+        return "non-finite vertex coordinates"
+    if f.min() < 0 or f.max() >= len(v):
+        return "face index out of range"
+    if (f[:, 0] == f[:, 1]).any() or (f[:, 1] == f[:, 2]).any() or (f[:, 2] == f[:, 0]).any():
+        return "face with a repeated vertex"
+    _, counts = edge_face_counts(f)
+    if (counts == 1).any():
+        return f"{int((counts == 1).sum())} boundary edges"
+    if (counts > 2).any():
+        return f"{int((counts > 2).sum())} non-manifold edges"
+    # Consistent orientation: every directed half-edge appears exactly once.
+    he = f[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    if len(np.unique(he, axis=0)) != len(he):
+        return "inconsistent face orientation"
+    if np.bincount(f.ravel(), minlength=len(v)).min() == 0:
+        return "unreferenced vertices"
+    # Vertex-manifold: around a closed manifold vertex the faces form one fan, so V - E + F per
+    # vertex link holds; a pinched vertex (two fans) shows up as more link cycles than vertices.
+    if _pinched_vertices(f, len(v)):
+        return "non-manifold (pinched) vertices"
+    return None
+
+
+def _pinched_vertices(faces: np.ndarray, n: int) -> bool:
+    """True when some vertex has more than one fan of faces (counted by union-find over its link)."""
+    # Each face contributes, for each corner, the link edge (next, prev). A vertex is manifold when
+    # its link edges form exactly one cycle; count cycles per vertex via connected components.
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+
+    corner = faces.reshape(-1)
+    nxt = faces[:, [1, 2, 0]].reshape(-1)
+    prv = faces[:, [2, 0, 1]].reshape(-1)
+    # Nodes are (vertex, link vertex) half-pairs; link edges join (c, nxt) and (c, prv).
+    key_a = corner * n + nxt
+    key_b = corner * n + prv
+    keys, inv = np.unique(np.concatenate([key_a, key_b]), return_inverse=True)
+    m = len(corner)
+    g = sp.coo_matrix((np.ones(m), (inv[:m], inv[m:])), shape=(len(keys), len(keys)))
+    n_comp, labels = connected_components(g, directed=False)
+    owner = keys // n
+    comps_per_vertex = np.bincount(owner[np.unique(labels, return_index=True)[1]], minlength=n)
+    return bool((comps_per_vertex > 1).any())
+
+
+def require_closed_manifold(mesh: Mesh, stage: str) -> Mesh:
+    problem = closed_manifold_problem(mesh)
+    if problem is not None:
+        raise MeshError(stage, problem)
+    return mesh
+
+
+def vertex_normals(mesh: Mesh) -> np.ndarray:
+    """Area-weighted unit vertex normals (N, 3)."""
+    v, f = mesh.vertices, mesh.faces
+    fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    n = np.zeros_like(v)
+    for k in range(3):
+        np.add.at(n, f[:, k], fn)
+    norm = np.linalg.norm(n, axis=1, keepdims=True)
+    return n / np.maximum(norm, 1e-30)
