@@ -1,0 +1,227 @@
+"""The `geodata` command line: prepare, biharmonic, info."""
+from __future__ import annotations
+
+import logging
+import time
+from collections import defaultdict
+from functools import partial
+
+import click
+import numpy as np
+from tqdm.auto import tqdm
+
+from geodata import store
+from geodata.parallel import BACKENDS, parallel_map, parse_shard
+
+log = logging.getLogger("geodata")
+
+
+class _TqdmHandler(logging.Handler):
+    """Log lines that do not break the progress bar."""
+
+    def emit(self, record):
+        tqdm.write(self.format(record), file=click.get_text_stream("stderr"))
+
+
+def _setup_logging(log_file: str | None) -> None:
+    log.handlers.clear()
+    log.setLevel(logging.INFO)
+    log.propagate = False
+    console = _TqdmHandler()
+    console.setFormatter(logging.Formatter("geodata %(levelname)s %(message)s"))
+    log.addHandler(console)
+    if log_file:
+        handler = logging.FileHandler(log_file)
+        handler.setFormatter(logging.Formatter("%(asctime)s geodata %(levelname)s %(message)s"))
+        log.addHandler(handler)
+
+
+def _shard(ctx, param, value):
+    try:
+        return parse_shard(value)
+    except ValueError as exc:
+        raise click.BadParameter(str(exc)) from None
+
+
+def _scale_options(fn):
+    """--jobs/--backend/--scheduler/--shard/--log, shared by prepare and biharmonic."""
+    options = [
+        click.option("--jobs", "-j", default=1, show_default=True, type=click.IntRange(1),
+                     help="Meshes processed at once (worker processes; with a cluster backend and no "
+                          "--scheduler, the size of the local cluster)."),
+        click.option("--backend", type=click.Choice(BACKENDS), default="loky", show_default=True,
+                     help="joblib backend: loky (local processes), dask or ray (needs the extra)."),
+        click.option("--scheduler", metavar="ADDRESS", default=None,
+                     help="Address of an existing Dask scheduler or Ray cluster (default: start a local one)."),
+        click.option("--shard", metavar="K/N", default=None, callback=_shard,
+                     help="Process only shard K of N (0 <= K < N), e.g. a SLURM array task; "
+                          "shards may write one store at once."),
+        click.option("--log", "log_file", type=click.Path(dir_okay=False), default=None,
+                     help="Also append the log lines to this file."),
+    ]
+    for option in reversed(options):
+        fn = option(fn)
+    return fn
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
+@click.version_option(package_name="geogegnn")
+def main():
+    """Turn raw triangle meshes into exact geodesic (and biharmonic) training data in a zarr store.
+
+    \b
+    Typical use:
+      geodata prepare raw/ out/ --pairs 600000 --jobs 8
+      geodata biharmonic out/ --jobs 8
+      geodata info out/
+    """
+
+
+@main.command()
+@click.argument("raw_dir", type=click.Path(exists=True))
+@click.argument("out", type=click.Path())
+@click.option("--pairs", default=600_000, show_default=True, type=click.IntRange(1),
+              help="Exact geodesic pairs per mesh (random sources x all other vertices).")
+@click.option("--target-vertices", default=5000, show_default=True, type=click.IntRange(100),
+              help="Vertex count of every output mesh (within +-20%).")
+@click.option("--collapse", default=0.15, show_default=True, type=click.FloatRange(0, 0.9),
+              help="Fraction of edges removed by the final QEM edge collapse.")
+@click.option("--seed", default=0, show_default=True, help="Seed of the pair sampling (per mesh: seed + mesh id).")
+@click.option("--geodesic-backend", type=click.Choice(["gdist", "libigl"]), default="gdist", show_default=True,
+              help="Exact geodesic code: tvb-gdist (fast) or libigl (reference); both give the same distances.")
+@click.option("--timeout", default=1800.0, show_default=True, help="Seconds one mesh may take before it counts as failed.")
+@click.option("--retry-failed", is_flag=True, help="Try again the meshes recorded under failed/.")
+@_scale_options
+def prepare(raw_dir, out, pairs, target_vertices, collapse, seed, geodesic_backend, timeout, retry_failed,
+            jobs, backend, scheduler, shard, log_file):
+    """Prepare every mesh file under RAW_DIR (OBJ/OFF/PLY/STL/GLB, searched recursively) into store OUT.
+
+    Stages: load, watertight (manifold3d), isotropic remesh (pymeshlab), QEM edge collapse,
+    normalize to [-1,1], exact geodesic pairs. A mesh counts once its group is committed; a rerun
+    skips committed meshes and redoes the rest, so a killed run loses nothing. Bad input is recorded
+    under failed/ with the stage and reason and the batch goes on.
+    """
+    from geodata.prepare import PrepareConfig, process_task, select_tasks
+
+    _setup_logging(log_file)
+    config = PrepareConfig(pairs, target_vertices, collapse, seed, geodesic_backend, timeout)
+    try:
+        store.create_store(out, config.store_params())
+    except store.StoreError as exc:
+        raise click.ClickException(str(exc)) from None
+    tasks, n_done, n_failed = select_tasks(raw_dir, out, shard, retry_failed)
+    log.info("prepare %s -> %s: %d to do, %d already committed, %d failed before%s", raw_dir, out, len(tasks),
+             n_done, n_failed, "" if shard == (0, 1) else f" (shard {shard[0]}/{shard[1]})")
+    rows = _run(partial(process_task, out=out, config=config), tasks, "prepare", jobs, backend, scheduler)
+    _summary(rows, n_done, n_failed)
+
+
+def _run(fn, tasks, what, jobs, backend, scheduler) -> list[dict]:
+    rows = []
+    bar = tqdm(total=len(tasks), desc=what, unit="mesh", disable=None, dynamic_ncols=True)
+    try:
+        for row in parallel_map(fn, tasks, jobs, backend, scheduler):
+            rows.append(row)
+            bar.update()
+            if row["status"] == "ok":
+                log.info("ok %s %s %.1fs", row["mesh_id"], row["source"], row["seconds"])
+            else:
+                log.warning("FAILED %s %s [%s] %s", row["mesh_id"], row["source"], row["stage"], row["error"])
+    except RuntimeError as exc:
+        raise click.ClickException(str(exc)) from None
+    finally:
+        bar.close()
+    return rows
+
+
+def _summary(rows: list[dict], n_done: int, n_failed: int) -> None:
+    ok = [r for r in rows if r["status"] == "ok"]
+    failed = [r for r in rows if r["status"] != "ok"]
+    stage_seconds = defaultdict(list)
+    for r in ok:
+        for stage, seconds in r["timings"].items():
+            stage_seconds[stage].append(seconds)
+    lines = [f"summary: {len(ok)} ok, {len(failed)} failed this run; "
+             f"{n_done} committed and {n_failed} failed before"]
+    if stage_seconds:
+        lines.append("seconds per mesh by stage (mean / max): " + ", ".join(
+            f"{s} {np.mean(v):.2f}/{np.max(v):.2f}" for s, v in stage_seconds.items()))
+    for r in failed:
+        lines.append(f"  failed {r['source']} [{r['stage']}] {r['error']}")
+    for line in lines:
+        log.info(line)
+
+
+@main.command()
+@click.argument("out", type=click.Path(exists=True))
+@click.option("--pairs", default=600_000, show_default=True, type=click.IntRange(1),
+              help="Biharmonic pairs per mesh (random sources x all other vertices of their component).")
+@click.option("--seed", default=0, show_default=True, help="Seed of the pair sampling (per mesh: seed + mesh id).")
+@click.option("--timeout", default=1800.0, show_default=True, help="Seconds one mesh may take before it counts as failed.")
+@_scale_options
+def biharmonic(out, pairs, seed, timeout, jobs, backend, scheduler, shard, log_file):
+    """Add exact biharmonic distances to every committed mesh of store OUT.
+
+    Distances follow Lipman, Rustamov and Funkhouser (2010) with libigl's cotangent Laplacian and
+    Voronoi mass matrix, from one sparse factorization per mesh. Written under
+    meshes/<id>/biharmonic/, whose own status "ok" is written last; reruns skip finished meshes.
+    """
+    from geodata.biharmonic_runner import BiharmonicConfig, process_biharmonic, select_biharmonic
+
+    _setup_logging(log_file)
+    try:
+        store.open_store(out)
+    except store.StoreError as exc:
+        raise click.ClickException(str(exc)) from None
+    config = BiharmonicConfig(pairs, seed, timeout)
+    tasks, n_done = select_biharmonic(out, shard)
+    log.info("biharmonic %s: %d to do, %d already done", out, len(tasks), n_done)
+    rows = _run(partial(process_biharmonic, out=out, config=config), tasks, "biharmonic", jobs, backend, scheduler)
+    _summary(rows, n_done, 0)
+
+
+@main.command()
+@click.argument("out", type=click.Path(exists=True))
+def info(out):
+    """Counts, failures, sizes and stage timings of store OUT."""
+    try:
+        root = store.open_store(out)
+    except store.StoreError as exc:
+        raise click.ClickException(str(exc)) from None
+    meshes = store.list_meshes(out)
+    failures = store.list_failures(out)
+    ok = {k: a for k, a in meshes.items() if a and a.get("status") == "ok"}
+    incomplete = sorted(set(meshes) - set(ok))
+    bh = sum(store.mesh_status(out, f"{k}/biharmonic") == "ok" for k in ok)
+    click.echo(f"store {out}  (format {root.attrs['geodata_format']}, params {root.attrs.get('params')})")
+    click.echo(f"meshes: {len(ok)} ok, {len(failures)} failed, {len(incomplete)} incomplete; "
+               f"biharmonic on {bh}")
+    if ok:
+        nv = np.array([a["n_vertices"] for a in ok.values()])
+        npairs = np.array([a["n_pairs"] for a in ok.values()])
+        click.echo(f"vertices per mesh: min {nv.min()}, mean {nv.mean():.0f}, max {nv.max()}; "
+                   f"geodesic pairs: {npairs.sum():,} in all")
+        stages = defaultdict(list)
+        for a in ok.values():
+            for s, t in a.get("timings", {}).items():
+                stages[s].append(t)
+        click.echo("seconds per mesh by stage (mean / max): " + ", ".join(
+            f"{s} {np.mean(v):.2f}/{np.max(v):.2f}" for s, v in stages.items()))
+    click.echo(f"size on disk: {_du(out) / 2**20:.1f} MiB")
+    if incomplete:
+        click.echo("incomplete (redone by the next run): " + ", ".join(incomplete))
+    if failures:
+        click.echo("failed:")
+        for mesh_id, a in sorted(failures.items(), key=lambda kv: kv[1].get("source", "")):
+            click.echo(f"  {a.get('source')}  [{a.get('stage')}]  {a.get('error')}")
+
+
+def _du(path) -> int:
+    from pathlib import Path
+
+    p = Path(path)
+    return sum(f.stat().st_size for f in p.rglob("*") if f.is_file()) if p.is_dir() else 0
+
+
+if __name__ == "__main__":
+    main()

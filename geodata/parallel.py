@@ -1,0 +1,190 @@
+"""Running per-mesh work: each mesh in its own forked process, meshes spread by joblib.
+
+Native mesh code (Kirsanov's exact geodesics, pymeshlab) can segfault or leak; a dead joblib worker
+fails the whole `Parallel` call (joblib#812). So the joblib worker only supervises: it forks a child
+per mesh, and a child that dies or hangs becomes that mesh's failure, never the batch's.
+"""
+from __future__ import annotations
+
+import contextlib
+import os
+import pickle
+import select
+import signal
+import sys
+import time
+from typing import Any, Callable, Iterable, Iterator
+
+from geodata.mesh import MeshError
+
+__all__ = ["BACKENDS", "run_isolated", "parallel_map", "parse_shard", "in_shard"]
+
+BACKENDS = ("loky", "dask", "ray")
+
+
+def run_isolated(fn: Callable[..., Any], *args, timeout: float | None = None) -> Any:
+    """fn(*args) in a forked child; MeshError when it raises one, dies, or exceeds `timeout` seconds.
+
+    The child reports the stage it enters through `stage(name)` (see `current_stage`), so a crash is
+    blamed on the right stage.
+    """
+    if not hasattr(os, "fork"):  # no process isolation on this platform
+        return fn(*args)
+    read_fd, write_fd = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # child
+        os.close(read_fd)
+        _child(fn, args, write_fd)
+    os.close(write_fd)
+    data, timed_out = _read_all(read_fd, timeout, pid)
+    _, wait_status = os.waitpid(pid, 0)
+    messages = _unpickle_all(data)
+    stage = next((m[1] for m in reversed(messages) if m[0] == "stage"), "unknown")
+    final = messages[-1] if messages and messages[-1][0] in ("result", "error") else None
+    if final is not None and final[0] == "result":
+        return final[1]
+    if final is not None:
+        raise MeshError(*final[1])
+    if timed_out:
+        raise MeshError(stage, f"timed out after {timeout:.0f} s")
+    if os.WIFSIGNALED(wait_status):
+        name = signal.Signals(os.WTERMSIG(wait_status)).name
+        raise MeshError(stage, f"native crash ({name}) in the worker process")
+    raise MeshError(stage, f"worker process exited with code {os.waitstatus_to_exitcode(wait_status)}")
+
+
+_report_fd: int | None = None
+
+
+def current_stage(name: str) -> None:
+    """Tell the supervising process which stage runs now (no-op outside `run_isolated`)."""
+    if _report_fd is not None:
+        os.write(_report_fd, pickle.dumps(("stage", name)))
+
+
+def _child(fn, args, write_fd: int) -> None:
+    global _report_fd
+    _report_fd = write_fd
+    code = 0
+    try:
+        try:
+            message = ("result", fn(*args))
+        except MeshError as exc:
+            message = ("error", (exc.stage, exc.reason))
+        except MemoryError:
+            message = ("error", ("unknown", "out of memory"))
+        except Exception as exc:  # any bug must still become a one-line failure of this mesh
+            message = ("error", ("unknown", f"{type(exc).__name__}: {' '.join(str(exc).split())[:200]}"))
+        payload = pickle.dumps(message, protocol=pickle.HIGHEST_PROTOCOL)
+        view = memoryview(payload)
+        while view:
+            view = view[os.write(write_fd, view):]
+    except BaseException:
+        code = 1
+    finally:
+        sys.stdout.flush()
+        os._exit(code)
+
+
+def _read_all(fd: int, timeout: float | None, pid: int) -> tuple[bytes, bool]:
+    chunks, deadline = [], None if timeout is None else time.monotonic() + timeout
+    with os.fdopen(fd, "rb", buffering=0) as pipe:
+        while True:
+            wait = None if deadline is None else max(0.0, deadline - time.monotonic())
+            ready, _, _ = select.select([pipe], [], [], wait)
+            if not ready:
+                os.kill(pid, signal.SIGKILL)
+                return b"".join(chunks), True
+            chunk = pipe.read(1 << 20)
+            if not chunk:
+                return b"".join(chunks), False
+            chunks.append(chunk)
+
+
+def _unpickle_all(data: bytes) -> list[tuple]:
+    """The messages of a child, in order; a message cut short by the child's death ends the list."""
+    import io
+
+    stream, messages = io.BytesIO(data), []
+    while stream.tell() < len(data):
+        try:
+            messages.append(pickle.load(stream))
+        except Exception:
+            break
+    return messages
+
+
+def parse_shard(text: str | None) -> tuple[int, int]:
+    """'K/N' (0 <= K < N) to (K, N); None means the whole batch."""
+    if text is None:
+        return 0, 1
+    try:
+        k, n = (int(x) for x in text.split("/"))
+    except ValueError:
+        raise ValueError(f"--shard must look like K/N, got {text!r}") from None
+    if not (n >= 1 and 0 <= k < n):
+        raise ValueError(f"--shard K/N needs 0 <= K < N, got {text!r}")
+    return k, n
+
+
+def in_shard(key: str, shard: tuple[int, int]) -> bool:
+    """Stable assignment of a work item to one of N shards by a hash of its key."""
+    import hashlib
+
+    k, n = shard
+    return int.from_bytes(hashlib.sha1(key.encode()).digest()[:8], "big") % n == k
+
+
+@contextlib.contextmanager
+def joblib_backend(backend: str, jobs: int, scheduler: str | None):
+    """joblib's parallel_config for loky, or a Dask/Ray cluster (local one of `jobs` workers if no address)."""
+    import joblib
+
+    if backend == "loky":
+        with joblib.parallel_config(backend="loky", n_jobs=jobs):
+            yield
+    elif backend == "dask":
+        try:
+            from dask.distributed import Client, LocalCluster
+        except ImportError:
+            raise RuntimeError("--backend dask needs the dask extra: pip install 'geogegnn[dask]'") from None
+        cluster = None if scheduler else LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True,
+                                                      dashboard_address=None)
+        with Client(scheduler or cluster) as client, joblib.parallel_config(backend="dask", n_jobs=-1):
+            yield
+            client.close()
+        if cluster is not None:
+            cluster.close()
+    elif backend == "ray":
+        try:
+            import ray
+            from ray.util.joblib import register_ray
+        except ImportError:
+            raise RuntimeError("--backend ray needs the ray extra: pip install 'geogegnn[ray]'") from None
+        register_ray()
+        ray.init(address=scheduler, num_cpus=None if scheduler else jobs, include_dashboard=False,
+                 ignore_reinit_error=True, log_to_driver=False)
+        try:
+            with joblib.parallel_config(backend="ray", n_jobs=-1 if scheduler else jobs):
+                yield
+        finally:
+            ray.shutdown()
+    else:
+        raise ValueError(f"unknown backend {backend!r}; choose from {BACKENDS}")
+
+
+def parallel_map(fn: Callable, items: Iterable, jobs: int = 1, backend: str = "loky",
+                 scheduler: str | None = None) -> Iterator:
+    """fn(item) for every item, results in completion order. jobs=1 with loky runs in this process."""
+    import joblib
+
+    items = list(items)
+    if not items:
+        return
+    if backend == "loky" and jobs == 1:
+        yield from map(fn, items)
+        return
+    with joblib_backend(backend, jobs, scheduler):
+        # max_nbytes=None: no read-only memmaps in the workers; items are small anyway.
+        yield from joblib.Parallel(return_as="generator_unordered", max_nbytes=None)(
+            joblib.delayed(fn)(item) for item in items)

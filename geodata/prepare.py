@@ -1,0 +1,171 @@
+"""`geodata prepare`: raw mesh files to committed mesh groups with exact geodesic pairs.
+
+The stage functions are pure (Mesh -> Mesh); this module alone wires them, times them, checks the
+invariants between them and touches files and the store.
+"""
+from __future__ import annotations
+
+import hashlib
+import importlib.metadata
+import re
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from geodata import store
+from geodata.geodesic import exact_geodesic_pairs
+from geodata.mesh import Mesh, MeshError, require_closed_manifold, unique_edges, vertex_normals
+from geodata.parallel import current_stage, in_shard, run_isolated
+from geodata.stages.load import MESH_SUFFIXES, load_mesh_bytes
+from geodata.stages.normalize import normalize
+from geodata.stages.remesh import remesh, simplify
+from geodata.stages.watertight import watertight
+
+__all__ = ["PrepareConfig", "MeshTask", "discover", "make_tasks", "mesh_rng", "prepare_mesh",
+           "process_task", "STAGES"]
+
+STAGES = ("load", "watertight", "remesh", "simplify", "normalize", "geodesic")
+LIBRARIES = ("trimesh", "manifold3d", "pymeshlab", "fast-simplification", "tvb-gdist", "libigl", "numpy")
+
+
+@dataclass(frozen=True)
+class PrepareConfig:
+    pairs: int = 600_000
+    target_vertices: int = 5000
+    collapse: float = 0.15
+    seed: int = 0
+    geodesic_backend: str = "gdist"
+    timeout: float = 1800.0  # seconds a mesh may take before it is recorded as failed
+
+    def store_params(self) -> dict:
+        """The parameters that decide the data (a store holds one setting of them)."""
+        p = asdict(self)
+        del p["timeout"]
+        return p
+
+
+@dataclass(frozen=True)
+class MeshTask:
+    path: str      # absolute path of the raw file
+    source: str    # path relative to the input root (as recorded in the store)
+    mesh_id: str
+    sha256: str
+
+
+def discover(raw_dir: str | Path) -> list[str]:
+    """Mesh files under raw_dir, recursively, as sorted relative POSIX paths."""
+    root = Path(raw_dir)
+    if root.is_file():
+        return [root.name] if root.suffix.lower() in MESH_SUFFIXES else []
+    return sorted(p.relative_to(root).as_posix() for p in root.rglob("*")
+                  if p.is_file() and p.suffix.lower() in MESH_SUFFIXES)
+
+
+def make_tasks(raw_dir: str | Path, sources: list[str]) -> list[MeshTask]:
+    """Tasks with ids `<safe stem>-<8 hex of the content hash>`; identical files collapse to one task."""
+    root = Path(raw_dir)
+    base = root.parent if root.is_file() else root
+    tasks: dict[str, MeshTask] = {}
+    for source in sources:
+        path = base / source
+        digest = hashlib.sha256(path.read_bytes()).hexdigest()
+        stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(source).stem).strip("._") or "mesh"
+        mesh_id = f"{stem[:64]}-{digest[:8]}"
+        tasks.setdefault(mesh_id, MeshTask(str(path.resolve()), source, mesh_id, digest))
+    return list(tasks.values())
+
+
+def mesh_rng(seed: int, mesh_id: str) -> np.random.Generator:
+    """A mesh's own random stream: the same for a mesh whatever the job count, shard or order."""
+    key = int.from_bytes(hashlib.sha256(mesh_id.encode()).digest()[:8], "big")
+    return np.random.default_rng([seed, key])
+
+
+def prepare_mesh(data: bytes, suffix: str, config: PrepareConfig, rng: np.random.Generator,
+                 timings: dict | None = None) -> tuple[Mesh, np.ndarray, np.ndarray]:
+    """All stages on one file's bytes: the normalized mesh, its geodesic pairs and distances."""
+    timings = {} if timings is None else timings
+
+    def run(stage, fn, *args, check=True):
+        current_stage(stage)
+        t = time.perf_counter()
+        try:
+            result = fn(*args)
+        except MeshError:
+            raise
+        except Exception as exc:  # a library error is this stage's failure, in one line
+            raise MeshError(stage, f"{type(exc).__name__}: {' '.join(str(exc).split())[:200]}") from None
+        if check:  # invariants after every stage: native code downstream segfaults on broken meshes
+            require_closed_manifold(result, stage)
+        timings[stage] = round(time.perf_counter() - t, 4)
+        return result
+
+    mesh = run("load", load_mesh_bytes, data, suffix, check=False)
+    mesh = run("watertight", watertight, mesh)
+    mesh = run("remesh", remesh, mesh, config.target_vertices)
+    mesh = run("simplify", simplify, mesh, config.collapse)
+    mesh = run("normalize", normalize, mesh)
+    pairs, distances = run("geodesic", exact_geodesic_pairs, mesh, config.pairs, rng,
+                           config.geodesic_backend, check=False)
+    return mesh, pairs, distances
+
+
+def _compute(task: MeshTask, config: PrepareConfig) -> tuple[dict, dict]:
+    """Runs in the isolated child: arrays to store and the timings."""
+    current_stage("load")
+    data = Path(task.path).read_bytes()
+    timings: dict = {}
+    mesh, pairs, distances = prepare_mesh(data, Path(task.path).suffix, config,
+                                          mesh_rng(config.seed, task.mesh_id), timings)
+    arrays = {
+        "vertices": mesh.vertices.astype(np.float32),
+        "faces": mesh.faces.astype(np.int32),
+        "normals": vertex_normals(mesh).astype(np.float32),
+        "edges": unique_edges(mesh.faces).astype(np.int32),
+        "geodesic/pairs": pairs,
+        "geodesic/distances": distances,
+    }
+    return arrays, timings
+
+
+def library_versions() -> dict:
+    versions = {}
+    for name in LIBRARIES:
+        try:
+            versions[name] = importlib.metadata.version(name)
+        except importlib.metadata.PackageNotFoundError:
+            versions[name] = None
+    return versions
+
+
+def process_task(task: MeshTask, out: str, config: PrepareConfig) -> dict:
+    """Prepare one mesh and commit it (or record its failure). Returns a summary row; never raises MeshError."""
+    start = time.perf_counter()
+    row = {"mesh_id": task.mesh_id, "source": task.source}
+    try:
+        arrays, timings = run_isolated(_compute, task, config, timeout=config.timeout)
+    except MeshError as exc:
+        store.record_failure(out, task.mesh_id, task.source, exc.stage, exc.reason)
+        store.remove_mesh(out, task.mesh_id)
+        return {**row, "status": "failed", "stage": exc.stage, "error": exc.reason,
+                "seconds": time.perf_counter() - start}
+    attrs = {"source": task.source, "sha256": task.sha256, "params": config.store_params(),
+             "timings": timings, "n_vertices": len(arrays["vertices"]), "n_faces": len(arrays["faces"]),
+             "n_pairs": len(arrays["geodesic/pairs"]), "versions": library_versions()}
+    store.write_group(out, f"meshes/{task.mesh_id}", arrays, attrs)
+    store.commit(out, f"meshes/{task.mesh_id}")
+    store.clear_failure(out, task.mesh_id)
+    return {**row, "status": "ok", "timings": timings, "n_vertices": attrs["n_vertices"],
+            "seconds": time.perf_counter() - start}
+
+
+def select_tasks(raw_dir: str | Path, out: str, shard: tuple[int, int], retry_failed: bool
+                 ) -> tuple[list[MeshTask], int, int]:
+    """This shard's tasks that still need work, and how many were already committed or failed."""
+    tasks = make_tasks(raw_dir, [s for s in discover(raw_dir) if in_shard(s, shard)])
+    failed = set() if retry_failed else set(store.list_failures(out))
+    done = {t.mesh_id for t in tasks if store.mesh_status(out, t.mesh_id) == "ok"}
+    pending = [t for t in tasks if t.mesh_id not in done and t.mesh_id not in failed]
+    return pending, len(done), sum(t.mesh_id in failed for t in tasks)

@@ -1,0 +1,66 @@
+"""Stage 1, load: bytes of a mesh file to a validated, cleaned triangle mesh."""
+from __future__ import annotations
+
+import io
+
+import numpy as np
+import trimesh
+
+from geodata.mesh import Mesh, MeshError
+
+__all__ = ["MESH_SUFFIXES", "load_mesh_bytes", "clean"]
+
+MESH_SUFFIXES = (".obj", ".off", ".ply", ".stl", ".glb")
+
+
+def load_mesh_bytes(data: bytes, suffix: str) -> Mesh:
+    """Parse a mesh file's bytes (format from `suffix`), validate it and clean it.
+
+    Raises MeshError("load", reason) for anything that is not a usable triangle mesh.
+    """
+    if len(data) == 0:
+        raise MeshError("load", "empty file")
+    try:
+        # process=False: keep the file's indices so validation sees what the file really says.
+        loaded = trimesh.load(io.BytesIO(data), file_type=suffix.lstrip(".").lower(), process=False,
+                              force="mesh")
+    except Exception as exc:  # trimesh raises many types for garbage input
+        raise MeshError("load", f"unreadable as {suffix.lstrip('.').upper()}: {_one_line(exc)}") from None
+    if not isinstance(loaded, trimesh.Trimesh):
+        raise MeshError("load", "file holds no triangle mesh")
+    vertices = np.asarray(loaded.vertices, dtype=np.float64).reshape(-1, 3)
+    faces = np.asarray(loaded.faces).reshape(-1, 3)
+    return clean(vertices, faces)
+
+
+def clean(vertices: np.ndarray, faces: np.ndarray) -> Mesh:
+    """Validate raw arrays, then merge duplicate vertices and drop degenerate faces and unused vertices."""
+    if len(faces) == 0:
+        raise MeshError("load", "no faces")
+    if not np.isfinite(vertices).all():
+        raise MeshError("load", f"{int((~np.isfinite(vertices)).any(axis=1).sum())} vertices with NaN/inf coordinates")
+    if not np.issubdtype(faces.dtype, np.integer):
+        raise MeshError("load", "non-integer face indices")
+    if faces.min() < 0 or faces.max() >= len(vertices):
+        raise MeshError("load", f"face index out of range (faces reference {int(faces.max())}, "
+                                f"file has {len(vertices)} vertices)")
+    # Merge coincident vertices exactly (soups duplicate them per part or per face).
+    unique, inverse = np.unique(vertices, axis=0, return_inverse=True)
+    faces = inverse.reshape(-1)[faces]
+    keep = (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 2] != faces[:, 0])
+    faces = faces[keep]
+    if len(faces):
+        e1 = unique[faces[:, 1]] - unique[faces[:, 0]]
+        e2 = unique[faces[:, 2]] - unique[faces[:, 0]]
+        area2 = np.linalg.norm(np.cross(e1, e2), axis=1)
+        scale = np.ptp(unique, axis=0).max()
+        faces = faces[area2 > 1e-12 * scale * scale]
+    if len(faces) == 0:
+        raise MeshError("load", "all faces are degenerate (zero area)")
+    used, compact = np.unique(faces, return_inverse=True)
+    return Mesh(unique[used], compact.reshape(-1, 3))
+
+
+def _one_line(exc: Exception) -> str:
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    return text[:200]

@@ -1,0 +1,63 @@
+import numpy as np
+import pytest
+
+from geodata.mesh import MeshError, closed_manifold_problem
+from geodata.stages.load import load_mesh_bytes
+
+CUBE_OBJ = b"""v 0 0 0
+v 1 0 0
+v 1 1 0
+v 0 1 0
+v 0 0 1
+v 1 0 1
+v 1 1 1
+v 0 1 1
+f 1 3 2
+f 1 4 3
+f 5 6 7
+f 5 7 8
+f 1 2 6
+f 1 6 5
+f 2 3 7
+f 2 7 6
+f 3 4 8
+f 3 8 7
+f 4 1 5
+f 4 5 8
+"""
+
+
+def test_cube_loads_closed_and_manifold():
+    mesh = load_mesh_bytes(CUBE_OBJ, ".obj")
+    assert mesh.n_vertices == 8 and mesh.n_faces == 12
+    assert closed_manifold_problem(mesh) is None
+
+
+def test_duplicate_vertices_are_merged():
+    # a soup: every face with its own copies of the vertices
+    mesh = load_mesh_bytes(CUBE_OBJ, ".obj")
+    soup = "".join(f"v {x} {y} {z}\n" for x, y, z in mesh.vertices[mesh.faces.ravel()])
+    soup += "".join(f"f {3 * i + 1} {3 * i + 2} {3 * i + 3}\n" for i in range(mesh.n_faces))
+    merged = load_mesh_bytes(soup.encode(), ".obj")
+    assert merged.n_vertices == 8 and closed_manifold_problem(merged) is None
+
+
+BAD_INPUTS = {
+    "empty": (b"", ".obj", "empty file"),
+    "garbage": (bytes(range(256)) * 40, ".ply", "unreadable"),
+    "not a mesh": (b"\x89PNG\r\n\x1a\n" + b"\0" * 200, ".stl", ""),
+    "nan": (b"v 0 0 0\nv 1 0 nan\nv 0 1 0\nf 1 2 3\n", ".obj", "NaN/inf"),
+    "inf": (b"OFF\n3 1 0\n0 0 0\n1 0 inf\n0 1 0\n3 0 1 2\n", ".off", "NaN/inf"),
+    "index out of range": (b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n", ".off", "range"),
+    "no faces": (b"v 0 0 0\nv 1 0 0\nv 0 1 0\n", ".obj", ""),
+    "all degenerate": (b"v 0 0 0\nv 1 0 0\nv 2 0 0\nv 0 1 0\nf 1 2 3\nf 1 1 4\n", ".obj", "degenerate"),
+}
+
+
+@pytest.mark.parametrize("name", BAD_INPUTS)
+def test_bad_input_raises_one_line_mesh_error(name):
+    data, suffix, words = BAD_INPUTS[name]
+    with pytest.raises(MeshError) as info:
+        load_mesh_bytes(data, suffix)
+    assert info.value.stage == "load"
+    assert words in info.value.reason and "\n" not in info.value.reason and info.value.reason
