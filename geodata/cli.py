@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import logging
+import sys
 import time
 from collections import defaultdict
 from functools import partial
@@ -20,7 +21,7 @@ class _TqdmHandler(logging.Handler):
     """Log lines that do not break the progress bar."""
 
     def emit(self, record):
-        tqdm.write(self.format(record), file=click.get_text_stream("stderr"))
+        tqdm.write(self.format(record), file=sys.stderr)
 
 
 def _setup_logging(log_file: str | None) -> None:
@@ -71,6 +72,7 @@ def main():
 
     \b
     Typical use:
+      geodata examples raw/            # or bring your own meshes
       geodata prepare raw/ out/ --pairs 600000 --jobs 8
       geodata biharmonic out/ --jobs 8
       geodata info out/
@@ -158,8 +160,9 @@ def _summary(rows: list[dict], n_done: int, n_failed: int) -> None:
               help="Biharmonic pairs per mesh (random sources x all other vertices of their component).")
 @click.option("--seed", default=0, show_default=True, help="Seed of the pair sampling (per mesh: seed + mesh id).")
 @click.option("--timeout", default=1800.0, show_default=True, help="Seconds one mesh may take before it counts as failed.")
+@click.option("--retry-failed", is_flag=True, help="Try again the meshes whose biharmonic step failed.")
 @_scale_options
-def biharmonic(out, pairs, seed, timeout, jobs, backend, scheduler, shard, log_file):
+def biharmonic(out, pairs, seed, timeout, retry_failed, jobs, backend, scheduler, shard, log_file):
     """Add exact biharmonic distances to every committed mesh of store OUT.
 
     Distances follow Lipman, Rustamov and Funkhouser (2010) with libigl's cotangent Laplacian and
@@ -174,10 +177,23 @@ def biharmonic(out, pairs, seed, timeout, jobs, backend, scheduler, shard, log_f
     except store.StoreError as exc:
         raise click.ClickException(str(exc)) from None
     config = BiharmonicConfig(pairs, seed, timeout)
-    tasks, n_done = select_biharmonic(out, shard)
-    log.info("biharmonic %s: %d to do, %d already done", out, len(tasks), n_done)
+    tasks, n_done, n_failed = select_biharmonic(out, shard, retry_failed)
+    log.info("biharmonic %s: %d to do, %d already done, %d failed before", out, len(tasks), n_done, n_failed)
     rows = _run(partial(process_biharmonic, out=out, config=config), tasks, "biharmonic", jobs, backend, scheduler)
-    _summary(rows, n_done, 0)
+    _summary(rows, n_done, n_failed)
+
+
+@main.command()
+@click.argument("out_dir", type=click.Path(file_okay=False))
+def examples(out_dir):
+    """Write a few furniture-like triangle soups (table, chair, lamp, shelf, mug, open crate) to OUT_DIR.
+
+    They are built from primitives with the defects of real catalog meshes, to try the pipeline on.
+    """
+    from geodata.examples import write_examples
+
+    for path in write_examples(out_dir):
+        click.echo(path)
 
 
 @main.command()
@@ -192,10 +208,10 @@ def info(out):
     failures = store.list_failures(out)
     ok = {k: a for k, a in meshes.items() if a and a.get("status") == "ok"}
     incomplete = sorted(set(meshes) - set(ok))
-    bh = sum(store.mesh_status(out, f"{k}/biharmonic") == "ok" for k in ok)
+    bh = [store.mesh_status(out, f"{k}/biharmonic") for k in ok]
     click.echo(f"store {out}  (format {root.attrs['geodata_format']}, params {root.attrs.get('params')})")
     click.echo(f"meshes: {len(ok)} ok, {len(failures)} failed, {len(incomplete)} incomplete; "
-               f"biharmonic on {bh}")
+               f"biharmonic: {bh.count('ok')} ok, {bh.count('failed')} failed")
     if ok:
         nv = np.array([a["n_vertices"] for a in ok.values()])
         npairs = np.array([a["n_pairs"] for a in ok.values()])

@@ -14,14 +14,14 @@ from pathlib import Path
 import numpy as np
 import zarr
 
-class StoreError(Exception):
-    """The store path is missing or is not a geodata store."""
-
-
-__all__ = ["StoreError", "FORMAT", "create_store", "open_store", "mesh_status", "write_group", "commit",
-           "record_failure", "clear_failure", "remove_mesh", "list_meshes", "list_failures"]
+__all__ = ["StoreError", "FORMAT", "create_store", "open_store", "group_attrs", "mesh_status", "write_group",
+           "commit", "record_failure", "clear_failure", "remove_mesh", "list_meshes", "list_failures"]
 
 FORMAT = 1
+
+
+class StoreError(Exception):
+    """The store path is missing or is not a geodata store."""
 
 
 def create_store(out: str | Path, params: dict) -> zarr.Group:
@@ -58,7 +58,7 @@ def open_store(out: str | Path) -> zarr.Group:
     return root
 
 
-def _attrs(out: str, path: str) -> dict | None:
+def group_attrs(out: str | Path, path: str) -> dict | None:
     """A group's attributes, or None when the group is missing or its metadata half-written."""
     try:
         return dict(zarr.open_group(f"{out}/{path}", mode="r").attrs)
@@ -66,10 +66,10 @@ def _attrs(out: str, path: str) -> dict | None:
         return None
 
 
-def mesh_status(out: str | Path, mesh_id: str, mark: str = "status") -> str | None:
-    """The value of a mesh's commit mark ("ok" once committed), or None."""
-    attrs = _attrs(str(out), f"meshes/{mesh_id}")
-    return None if attrs is None else attrs.get(mark)
+def mesh_status(out: str | Path, path: str) -> str | None:
+    """The status of meshes/<path> ("ok" once committed), or None when missing or half-written."""
+    attrs = group_attrs(out, f"meshes/{path}")
+    return None if attrs is None else attrs.get("status")
 
 
 def write_group(out: str | Path, path: str, arrays: dict[str, np.ndarray], attrs: dict) -> zarr.Group:
@@ -85,10 +85,9 @@ def _chunks(data: np.ndarray) -> tuple[int, ...]:
     return (rows, *data.shape[1:])
 
 
-def commit(out: str | Path, path: str, mark: str = "status", **attrs) -> None:
-    """Write the commit mark (and any final attrs) last: a reader counts the group only from now on."""
-    group = zarr.open_group(f"{out}/{path}", mode="r+")
-    group.attrs.update({**attrs, mark: "ok"})
+def commit(out: str | Path, path: str) -> None:
+    """Write the commit mark last: a reader counts the group only from now on."""
+    zarr.open_group(f"{out}/{path}", mode="r+").attrs["status"] = "ok"
 
 
 def record_failure(out: str | Path, mesh_id: str, source: str, stage: str, error: str) -> None:
@@ -112,12 +111,12 @@ def _children(out: str, parent: str) -> list[str]:
 def list_meshes(out: str | Path) -> dict[str, dict | None]:
     """Every mesh group under meshes/ with its attrs (None when unreadable)."""
     out = str(out)
-    return {mesh_id: _attrs(out, f"meshes/{mesh_id}") for mesh_id in _children(out, "meshes")}
+    return {mesh_id: group_attrs(out, f"meshes/{mesh_id}") for mesh_id in _children(out, "meshes")}
 
 
 def list_failures(out: str | Path) -> dict[str, dict]:
     out = str(out)
-    failures = {mesh_id: _attrs(out, f"failed/{mesh_id}") for mesh_id in _children(out, "failed")}
+    failures = {mesh_id: group_attrs(out, f"failed/{mesh_id}") for mesh_id in _children(out, "failed")}
     return {k: v for k, v in failures.items() if v is not None}
 
 

@@ -1,0 +1,162 @@
+"""`geodata prepare` end to end: store contract, bad input, resume after SIGKILL, job/shard determinism."""
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import zarr
+from click.testing import CliRunner
+
+from geodata import store
+from geodata.cli import main
+from geodata.examples import example_soups
+from geodata.mesh import Mesh, closed_manifold_problem, unique_edges
+
+ARGS = ["--pairs", "3000", "--target-vertices", "600"]
+GOOD = ("table", "lamp", "crate")
+BAD = {
+    "empty.obj": b"",
+    "garbage.ply": bytes(range(256)) * 8,
+    "nan.obj": b"v 0 0 0\nv 1 0 nan\nv 0 1 0\nf 1 2 3\n",
+    "bad_index.off": b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 9\n",
+    "points_only.obj": b"v 0 0 0\nv 1 0 0\nv 0 1 0\n",
+    "flat.obj": b"v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n",
+    "picture.stl": b"\x89PNG\r\n\x1a\n" + bytes(300),
+}
+
+
+@pytest.fixture(scope="module")
+def raw(tmp_path_factory):
+    root = tmp_path_factory.mktemp("raw")
+    soups = example_soups()
+    (root / "nested").mkdir()
+    for i, name in enumerate(GOOD):
+        soups[name].export(root / ("nested" if i == 0 else "") / f"{name}.{['obj', 'ply', 'glb'][i]}")
+    for name, data in BAD.items():
+        (root / name).write_bytes(data)
+    (root / "notes.txt").write_text("not a mesh suffix: ignored")
+    return root
+
+
+def prepare(raw, out, *extra):
+    result = CliRunner().invoke(main, ["prepare", str(raw), str(out), *ARGS, *extra])
+    assert result.exit_code == 0, result.output
+    return result
+
+
+def arrays(out) -> dict:
+    """Every array of every committed mesh, keyed by path."""
+    data = {}
+    for mesh_id, attrs in store.list_meshes(out).items():
+        if attrs and attrs.get("status") == "ok":
+            g = zarr.open_group(f"{out}/meshes/{mesh_id}", mode="r")
+            for name in ("vertices", "faces", "normals", "edges", "geodesic/pairs", "geodesic/distances"):
+                data[f"{mesh_id}/{name}"] = g[name][:]
+    return data
+
+
+def assert_same(a: dict, b: dict):
+    assert a.keys() == b.keys()
+    for key in a:
+        assert a[key].dtype == b[key].dtype and np.array_equal(a[key], b[key]), key
+
+
+@pytest.fixture(scope="module")
+def reference(raw, tmp_path_factory):
+    out = tmp_path_factory.mktemp("ref") / "out.zarr"
+    result = prepare(raw, out)
+    return out, result.output
+
+
+def test_store_holds_valid_meshes_and_records_bad_input(reference):
+    out, output = reference
+    meshes = store.list_meshes(out)
+    ok = {k: a for k, a in meshes.items() if a["status"] == "ok"}
+    assert sorted(a["source"] for a in ok.values()) == ["crate.glb", "lamp.ply", "nested/table.obj"]
+    root = zarr.open_group(str(out), mode="r")
+    assert root.attrs["geodata_format"] == 1
+    for mesh_id in ok:
+        g = root[f"meshes/{mesh_id}"]
+        v, f, n, e = g["vertices"][:], g["faces"][:], g["normals"][:], g["edges"][:]
+        p, d = g["geodesic/pairs"][:], g["geodesic/distances"][:]
+        assert (v.dtype, f.dtype, n.dtype, e.dtype, p.dtype, d.dtype) == (
+            np.float32, np.int32, np.float32, np.int32, np.uint32, np.float32)
+        assert closed_manifold_problem(Mesh(v, f)) is None
+        assert abs(len(v) - 600) <= 0.2 * 600
+        half = (v.max(0) - v.min(0)) / 2
+        assert half.max() == 1.0 and np.allclose((v.max(0) + v.min(0)) / 2, 0, atol=1e-6)
+        np.testing.assert_allclose(np.linalg.norm(n, axis=1), 1, atol=1e-5)
+        assert np.array_equal(e, unique_edges(f.astype(np.int64)))
+        assert len(p) >= 3000 and (p[:, 0] != p[:, 1]).all() and p.max() < len(v)
+        assert np.isfinite(d).all() and (d > 0).all()
+        # geodesic >= straight line, and not absurdly longer on these compact shapes
+        straight = np.linalg.norm(v[p[:, 0]] - v[p[:, 1]], axis=1)
+        assert (d >= straight * (1 - 1e-4)).all()
+        assert set(g.attrs["timings"]) == {"load", "watertight", "remesh", "simplify", "normalize", "geodesic"}
+    failures = store.list_failures(out)
+    assert sorted(a["source"] for a in failures.values()) == sorted(BAD)
+    for a in failures.values():
+        assert a["stage"] == "load" and a["error"] and "\n" not in a["error"]
+    assert "Traceback" not in output
+    assert "3 ok, 7 failed" in output
+
+
+def test_info_lists_counts_and_failures(reference):
+    out, _ = reference
+    result = CliRunner().invoke(main, ["info", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "3 ok, 7 failed, 0 incomplete" in result.output
+    for name in BAD:
+        assert name in result.output
+
+
+def test_rerun_does_nothing_and_other_params_are_refused(reference, raw):
+    out, _ = reference
+    before = arrays(out)
+    result = prepare(raw, out)
+    assert "0 to do, 3 already committed, 7 failed before" in result.output
+    assert_same(before, arrays(out))
+    refused = CliRunner().invoke(main, ["prepare", str(raw), str(out), "--pairs", "10", "--target-vertices", "600"])
+    assert refused.exit_code != 0 and "pairs" in refused.output
+
+
+def test_jobs_and_shards_give_identical_arrays(reference, raw, tmp_path):
+    ref = arrays(reference[0])
+    prepare(raw, tmp_path / "jobs2", "--jobs", "2")
+    assert_same(ref, arrays(tmp_path / "jobs2"))
+    # Two shard processes writing one store at the same time.
+    procs = [subprocess.Popen([sys.executable, "-m", "geodata.cli", "prepare", str(raw), str(tmp_path / "shards"),
+                               *ARGS, "--shard", f"{k}/2"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+             for k in range(2)]
+    for p in procs:
+        assert p.wait(timeout=600) == 0, p.stdout.read().decode()
+    assert_same(ref, arrays(tmp_path / "shards"))
+    assert len(store.list_failures(tmp_path / "shards")) == len(BAD)
+
+
+def test_sigkill_loses_nothing_and_rerun_finishes_exactly_the_rest(reference, raw, tmp_path):
+    out = tmp_path / "killed.zarr"
+    proc = subprocess.Popen([sys.executable, "-m", "geodata.cli", "prepare", str(raw), str(out), *ARGS],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline:  # kill the whole process group once the first mesh is committed
+        if out.exists() and any(a and a.get("status") == "ok" for a in store.list_meshes(out).values()):
+            break
+        time.sleep(0.05)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    committed = sorted(k for k, a in store.list_meshes(out).items() if a and a.get("status") == "ok")
+    assert 1 <= len(committed) < 3
+    # Make one committed mesh look like a kill hit it while writing: no mark, a truncated chunk.
+    group = zarr.open_group(f"{out}/meshes/{committed[0]}", mode="r+")
+    del group.attrs["status"]
+    chunk = next(p for p in (out / "meshes" / committed[0] / "geodesic" / "distances").rglob("*")
+                 if p.is_file() and p.name != "zarr.json")
+    chunk.write_bytes(chunk.read_bytes()[:10])
+    result = prepare(raw, out)
+    assert f"{len(committed) - 1} already committed" in result.output
+    assert_same(arrays(reference[0]), arrays(out))
