@@ -150,11 +150,12 @@ def joblib_backend(backend: str, jobs: int, scheduler: str | None):
             raise RuntimeError("--backend dask needs the dask extra: pip install 'geogegnn[dask]'") from None
         cluster = None if scheduler else LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True,
                                                       dashboard_address=None)
-        with Client(scheduler or cluster) as client, joblib.parallel_config(backend="dask", n_jobs=-1):
-            yield
-            client.close()
-        if cluster is not None:
-            cluster.close()
+        try:
+            with Client(scheduler or cluster), joblib.parallel_config(backend="dask", n_jobs=-1):
+                yield
+        finally:
+            if cluster is not None:
+                cluster.close()
     elif backend == "ray":
         try:
             import ray
@@ -186,5 +187,12 @@ def parallel_map(fn: Callable, items: Iterable, jobs: int = 1, backend: str = "l
         return
     with joblib_backend(backend, jobs, scheduler):
         # max_nbytes=None: no read-only memmaps in the workers; items are small anyway.
-        yield from joblib.Parallel(return_as="generator_unordered", max_nbytes=None)(
-            joblib.delayed(fn)(item) for item in items)
+        if backend != "ray":
+            yield from joblib.Parallel(return_as="generator_unordered", max_nbytes=None)(
+                joblib.delayed(fn)(item) for item in items)
+            return
+        # Ray's joblib backend returns lists only: run in rounds so progress still shows.
+        parallel = joblib.Parallel(max_nbytes=None)
+        step = 4 * max(jobs, 1)
+        for start in range(0, len(items), step):
+            yield from parallel(joblib.delayed(fn)(item) for item in items[start:start + step])
