@@ -59,6 +59,18 @@ def open_grid(k: int = 16) -> Mesh:
     return Mesh(v, f)
 
 
+def graded(n: int = 500, power: float = 3.0) -> Mesh:
+    """Closed mesh with strongly graded triangle sizes (edge-length ratio ~3000): ill-conditioned L."""
+    rng = np.random.default_rng(9)
+    p = rng.normal(size=(n, 3))
+    p /= np.linalg.norm(p, axis=1, keepdims=True)
+    theta = np.pi * (np.arccos(np.clip(p[:, 2], -1, 1)) / np.pi) ** power   # crowd the north pole
+    phi = np.arctan2(p[:, 1], p[:, 0])
+    p = np.stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)], 1)
+    hull = trimesh.convex.convex_hull(p)
+    return Mesh(np.asarray(hull.vertices) * np.array([1.5, 1.0, 0.6]), np.asarray(hull.faces))
+
+
 def labels(mesh: Mesh) -> np.ndarray:
     n, f = mesh.n_vertices, mesh.faces
     adj = sp.coo_matrix((np.ones(3 * len(f)), (f.ravel(), f[:, [1, 2, 0]].ravel())), shape=(n, n))
@@ -78,7 +90,8 @@ def spectral_distances(mesh: Mesh) -> np.ndarray:
     return np.sqrt(np.maximum(sq[:, None] + sq[None, :] - 2 * emb @ emb.T, 0.0))
 
 
-MESHES = {"icosphere": icosphere, "bumpy": bumpy, "two_components": two_components, "open_grid": open_grid}
+MESHES = {"icosphere": icosphere, "bumpy": bumpy, "two_components": two_components, "open_grid": open_grid,
+          "graded": graded}
 
 
 @pytest.fixture(scope="module")
@@ -105,7 +118,9 @@ def test_equals_dense_spectral_sum(name):
     assert D.shape == (n, n) and D.dtype == np.float64
     assert np.isfinite(D[same]).all()
     rel = np.abs(D[off] - R[off]) / R[off]
-    assert rel.max() < 1e-5, rel.max()
+    # Round-off level (well under the 1e-5 asked for): a method that factors L M^-1 L (condition number squared)
+    # loses ~1e-7 on the graded mesh; factoring L alone stays near 1e-9.
+    assert rel.max() < 1e-8, rel.max()
     # Between components the distance is undefined.
     assert np.isnan(D[~same]).all()
 
@@ -217,9 +232,11 @@ def test_pairs_stay_within_components():
     p = pairs.astype(np.int64)
     assert (lab[p[:, 0]] == lab[p[:, 1]]).all()
     sources = np.unique(p[:, 0])
-    assert len(sources) == math.ceil(3000 / (mesh.n_vertices - 1))
     sizes = np.bincount(lab)
     assert len(pairs) == int((sizes[lab[sources]] - 1).sum())
+    # just enough sources: without the last one drawn, fewer than the pairs asked for
+    last = p[-1, 0]
+    assert 3000 <= len(pairs) and len(pairs) - (sizes[lab[last]] - 1) < 3000
     assert np.isfinite(dist).all() and (dist > 0).all()
 
 

@@ -1,0 +1,51 @@
+"""`geodata biharmonic` on a store: contract, agreement with the function, rerun and resume."""
+import shutil
+
+import numpy as np
+import zarr
+from click.testing import CliRunner
+
+from geodata import store
+from geodata.biharmonic import biharmonic_distances
+from geodata.cli import main
+from geodata.mesh import Mesh
+
+
+def biharmonic(out, *extra):
+    result = CliRunner().invoke(main, ["biharmonic", str(out), "--pairs", "2000", *extra])
+    assert result.exit_code == 0, result.output
+    return result.output
+
+
+def bh_arrays(out):
+    root = zarr.open_group(str(out), mode="r")
+    return {k: (root[f"meshes/{k}/biharmonic/pairs"][:], root[f"meshes/{k}/biharmonic/distances"][:])
+            for k, a in store.list_meshes(out).items() if a.get("status") == "ok"}
+
+
+def test_biharmonic_adds_exact_pairs_and_resumes(reference, tmp_path):
+    out = tmp_path / "out.zarr"
+    shutil.copytree(reference[0], out)
+    assert "3 to do" in biharmonic(out)
+    data = bh_arrays(out)
+    assert len(data) == 3
+    root = zarr.open_group(str(out), mode="r")
+    for mesh_id, (pairs, dist) in data.items():
+        g = root[f"meshes/{mesh_id}"]
+        assert g["biharmonic"].attrs["status"] == "ok" and g.attrs["status"] == "ok"
+        assert pairs.dtype == np.uint32 and dist.dtype == np.float32 and len(pairs) >= 2000
+        mesh = Mesh(g["vertices"][:], g["faces"][:])
+        source = int(pairs[0, 0])
+        rows = pairs[:, 0] == source
+        expected = biharmonic_distances(mesh, np.array([source]))[0, pairs[rows, 1]]
+        np.testing.assert_allclose(dist[rows], expected, rtol=1e-6)
+    assert "0 to do, 3 already done" in biharmonic(out)
+    # A group without its mark (as a kill would leave it) is redone, to the same values.
+    first = sorted(data)[0]
+    del zarr.open_group(f"{out}/meshes/{first}/biharmonic", mode="r+").attrs["status"]
+    assert "1 to do, 2 already done" in biharmonic(out, "--jobs", "2")
+    again = bh_arrays(out)
+    for k in data:
+        assert all(np.array_equal(a, b) for a, b in zip(data[k], again[k]))
+    info = CliRunner().invoke(main, ["info", str(out)])
+    assert "biharmonic: 3 ok, 0 failed" in info.output
