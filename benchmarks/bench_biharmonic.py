@@ -1,6 +1,6 @@
 """Benchmark: exact biharmonic distances for 600k pairs on a ~5k-vertex mesh vs the dense spectral sum.
 
-    /work/venv/bin/python benchmarks/bench_biharmonic.py [--vertices 5000] [--pairs 600000]
+    python benchmarks/bench_biharmonic.py [--vertices 5000] [--pairs 600000]
         [--mesh PATH ...] [--no-dense] [--threads 1] [--repeat 3]
 
 Runs on one core by default (BLAS threads pinned before numpy loads). The synthetic mesh is an

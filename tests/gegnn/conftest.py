@@ -1,74 +1,16 @@
-"""Tiny geodata stores written with plain zarr in the contract layout, with exact geodesics."""
-from __future__ import annotations
+"""Fixtures for the gegnn tests: tiny stores, one-thread torch."""
+import sys
+from pathlib import Path
 
-import gdist
-import numpy as np
 import pytest
-import trimesh
-import zarr
+import torch
 
-from gegnn.graph import normalize_vertices, unique_edges, vertex_normals
-
-
-def ellipsoid(axes=(1.0, 0.7, 0.5), subdivisions=2) -> tuple[np.ndarray, np.ndarray]:
-    m = trimesh.creation.icosphere(subdivisions)
-    return np.asarray(m.vertices) * np.asarray(axes), np.asarray(m.faces)
-
-
-def flat_grid(n=12) -> tuple[np.ndarray, np.ndarray]:
-    """A triangulated square: geodesic distance equals Euclidean distance."""
-    x, y = np.meshgrid(np.linspace(-1, 1, n), np.linspace(-1, 1, n), indexing="ij")
-    v = np.stack([x.ravel(), y.ravel(), np.zeros(n * n)], axis=1)
-    k = np.arange(n * n).reshape(n, n)
-    a, b, c, d = k[:-1, :-1].ravel(), k[1:, :-1].ravel(), k[1:, 1:].ravel(), k[:-1, 1:].ravel()
-    return v, np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
-
-
-def exact_pairs(v: np.ndarray, f: np.ndarray, sources: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Sources x all other vertices, exact polyhedral geodesics (tvb-gdist)."""
-    pairs, dists = [], []
-    targets = np.arange(len(v), dtype=np.int32)
-    for s in sources:
-        d = gdist.compute_gdist(v.astype(np.float64), f.astype(np.int32), np.array([s], np.int32), targets)
-        keep = targets != s
-        pairs.append(np.stack([np.full(keep.sum(), s), targets[keep]], 1))
-        dists.append(d[keep])
-    return np.concatenate(pairs).astype(np.uint32), np.concatenate(dists).astype(np.float32)
-
-
-def write_store(path, meshes: dict, num_sources: int = 8, biharmonic: bool = False, seed: int = 0) -> str:
-    """A store in the geodata layout; biharmonic/ holds the geodesics again (layout is what matters)."""
-    rng = np.random.default_rng(seed)
-    root = zarr.open_group(str(path), mode="w")
-    root.attrs["geodata_format"] = 1
-    meshes_group = root.create_group("meshes")
-    for mesh_id, (v, f) in meshes.items():
-        v, _, _ = normalize_vertices(v)
-        g = meshes_group.create_group(mesh_id)
-        g.attrs.update(source=f"{mesh_id}.obj")
-        for name, data in [("vertices", v.astype(np.float32)), ("faces", f.astype(np.int32)),
-                           ("normals", vertex_normals(v, f)), ("edges", unique_edges(f).astype(np.int32))]:
-            g.create_array(name, data=data)
-        sources = rng.choice(len(v), min(num_sources, len(v)), replace=False)
-        pairs, dists = exact_pairs(v, f, sources)
-        for kind in ["geodesic"] + (["biharmonic"] if biharmonic else []):
-            sub = g.create_group(kind)
-            sub.create_array("pairs", data=pairs)
-            sub.create_array("distances", data=dists)
-        if biharmonic:
-            g.attrs["biharmonic"] = "ok"
-        g.attrs["status"] = "ok"  # commit mark, written last
-    root.create_group("failed").create_group("broken_mesh").attrs.update(stage="load", error="no faces")
-    meshes_group.create_group("unfinished").attrs["source"] = "half.obj"  # no status: must be skipped
-    return str(path)
-
-
-FOUR_MESHES = {
-    "ellipsoid_a": ellipsoid((1.0, 0.7, 0.5)),
-    "ellipsoid_b": ellipsoid((0.6, 1.0, 0.8)),
-    "sphere": ellipsoid((1.0, 1.0, 1.0)),
-    "grid": flat_grid(12),
-}
+# Once tests/ is on sys.path (the root conftest's helpers), this folder is an importable namespace
+# package called "gegnn" that would shadow the editable install; a regular package found anywhere on
+# sys.path wins over a namespace one, so put the source tree there. Then the helpers' folder.
+sys.path.insert(0, str(Path(__file__).parents[2]))
+sys.path.insert(0, str(Path(__file__).parent))
+from gegnn_testing import FOUR_MESHES, ellipsoid, write_store  # noqa: E402
 
 
 @pytest.fixture(scope="session")
@@ -81,3 +23,13 @@ def tiny_store(tmp_path_factory) -> str:
 def one_mesh_store(tmp_path_factory) -> str:
     return write_store(tmp_path_factory.mktemp("store1") / "one.zarr",
                        {"ellipsoid": ellipsoid((1.0, 0.7, 0.5))}, num_sources=16)
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _one_thread():
+    # The test graphs are tiny: per-op threading overhead dominates and, on a shared 2-core machine,
+    # made steps ~10x slower. One thread also makes CPU results bitwise reproducible.
+    previous = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(previous)
