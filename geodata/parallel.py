@@ -7,6 +7,7 @@ per mesh, and a child that dies or hangs becomes that mesh's failure, never the 
 from __future__ import annotations
 
 import contextlib
+import faulthandler
 import os
 import pickle
 import select
@@ -65,6 +66,7 @@ def current_stage(name: str) -> None:
 def _child(fn, args, write_fd: int) -> None:
     global _report_fd
     _report_fd = write_fd
+    faulthandler.disable()  # a crash is reported by the parent in one line, not as a dump here
     code = 0
     try:
         try:

@@ -103,3 +103,29 @@ def test_sigkill_loses_nothing_and_rerun_finishes_exactly_the_rest(reference, ra
     result = prepare(raw, out)
     assert f"{len(committed) - 1} already committed" in result.output
     assert_same(arrays(reference[0]), arrays(out))
+
+
+def test_a_crashing_or_hanging_mesh_fails_alone(raw, tmp_path, monkeypatch):
+    """A segfault in native code and a hang are recorded as that mesh's failure; the batch goes on."""
+    import geodata.prepare
+    from geodata.stages.load import load_mesh_bytes
+
+    sizes = {load_mesh_bytes(p.read_bytes(), p.suffix).n_vertices: p.name
+             for p in [raw / "lamp.ply", raw / "crate.glb"]}
+    real = geodata.prepare.watertight
+
+    def misbehaving(mesh):
+        name = sizes.get(mesh.n_vertices)
+        if name == "lamp.ply":
+            os.kill(os.getpid(), signal.SIGSEGV)
+        if name == "crate.glb":
+            time.sleep(60)
+        return real(mesh)
+
+    monkeypatch.setattr(geodata.prepare, "watertight", misbehaving)
+    result = prepare(raw, tmp_path / "out.zarr", "--timeout", "20")
+    failures = {a["source"]: a for a in store.list_failures(tmp_path / "out.zarr").values()}
+    assert failures["lamp.ply"]["stage"] == "watertight" and "SIGSEGV" in failures["lamp.ply"]["error"]
+    assert failures["crate.glb"]["stage"] == "watertight" and "timed out" in failures["crate.glb"]["error"]
+    ok = [a["source"] for a in store.list_meshes(tmp_path / "out.zarr").values() if a.get("status") == "ok"]
+    assert ok == ["nested/table.obj"] and "Traceback" not in result.output
