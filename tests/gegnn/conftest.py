@@ -1,16 +1,7 @@
 """Fixtures for the gegnn tests: tiny stores, one-thread torch."""
-import sys
-from pathlib import Path
-
 import pytest
 import torch
-
-# Once tests/ is on sys.path (the root conftest's helpers), this folder is an importable namespace
-# package called "gegnn" that would shadow the editable install; a regular package found anywhere on
-# sys.path wins over a namespace one, so put the source tree there. Then the helpers' folder.
-sys.path.insert(0, str(Path(__file__).parents[2]))
-sys.path.insert(0, str(Path(__file__).parent))
-from gegnn_testing import FOUR_MESHES, ellipsoid, write_store  # noqa: E402
+from gegnn_stores import FOUR_MESHES, ellipsoid, write_store
 
 
 @pytest.fixture(scope="session")

@@ -1,0 +1,206 @@
+"""Reading a geodata store (zarr v3) and turning meshes into training batches.
+
+Sampling is a pure function of (seed, epoch, mesh id): a batch does not depend on which process or
+loader worker makes it, so resumed, multi-worker and multi-process runs see identical data.
+"""
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from .graph import Graph, directed_edges, disjoint_union, random_rotation
+from .nn.geopool import Hierarchy, build_hierarchy
+
+__all__ = ["GeodesicStore", "MeshGeometry", "Batch", "split_meshes", "epoch_batches", "sample_mesh",
+           "make_batch", "BatchDataset", "EpochSampler"]
+
+DISTANCES = ("geodesic", "biharmonic")
+VAL_EPOCH = -1  # rng stream of the fixed validation sample
+
+
+@dataclass
+class MeshGeometry:
+    vertices: np.ndarray  # float32 (N, 3), normalized
+    normals: np.ndarray   # float32 (N, 3)
+    edges: np.ndarray     # int64 (E, 2), undirected
+
+
+class GeodesicStore:
+    """Read-only view of a store written by ``geodata prepare``: committed meshes only (status "ok",
+    and for biharmonic distances the subgroup's own mark, ``biharmonic/`` status "ok"). Arrays are
+    read lazily."""
+
+    def __init__(self, path, distance: str = "geodesic"):
+        import zarr
+
+        if distance not in DISTANCES:
+            raise ValueError(f"distance must be one of {DISTANCES}, got {distance!r}")
+        self.path, self.distance = str(path), distance
+        self.root = zarr.open_group(self.path, mode="r")
+        if self.root.attrs.get("geodata_format") != 1:
+            raise ValueError(f"{path}: not a geodata store (attribute geodata_format != 1)")
+        meshes = self.root["meshes"] if "meshes" in self.root else None
+        self.mesh_ids = sorted(k for k, g in (meshes.groups() if meshes is not None else [])
+                               if self._committed(g))
+
+    def _committed(self, group) -> bool:
+        if group.attrs.get("status") != "ok":
+            return False
+        return (self.distance == "geodesic"
+                or ("biharmonic" in group and group["biharmonic"].attrs.get("status") == "ok"))
+
+    def geometry(self, mesh_id: str) -> MeshGeometry:
+        g = self.root[f"meshes/{mesh_id}"]
+        return MeshGeometry(np.asarray(g["vertices"][:], dtype=np.float32),
+                            np.asarray(g["normals"][:], dtype=np.float32),
+                            np.asarray(g["edges"][:], dtype=np.int64))
+
+    def pairs(self, mesh_id: str) -> tuple[np.ndarray, np.ndarray]:
+        """All stored pairs (P, 2) int64 and their distances (P,) float32."""
+        g = self.root[f"meshes/{mesh_id}/{self.distance}"]
+        return np.asarray(g["pairs"][:], dtype=np.int64), np.asarray(g["distances"][:], dtype=np.float32)
+
+
+def mesh_hash(mesh_id: str) -> int:
+    """A stable 63-bit hash of a mesh id (Python's hash() is salted per process)."""
+    return int.from_bytes(hashlib.sha256(mesh_id.encode()).digest()[:8], "little") >> 1
+
+
+def split_meshes(mesh_ids: list[str], val_fraction: float = 0.1) -> tuple[list[str], list[str]]:
+    """Deterministic train/validation split by hash of the mesh id; at least one validation mesh
+    (and one training mesh) whenever there are two or more meshes and ``val_fraction > 0``."""
+    ranked = sorted(mesh_ids, key=mesh_hash)
+    val = {m for m in ranked if mesh_hash(m) / 2 ** 63 < val_fraction}
+    if len(ranked) >= 2 and val_fraction > 0:
+        if not val:
+            val = {ranked[0]}
+        if len(val) == len(ranked):
+            val.discard(ranked[-1])
+    return sorted(set(mesh_ids) - val), sorted(val)
+
+
+def epoch_batches(mesh_ids: list[str], epoch: int, seed: int, batch_size: int, rank: int = 0,
+                  world: int = 1) -> list[tuple[str, ...]]:
+    """This rank's batches for one epoch: a seeded permutation dealt round-robin to the ranks (sharded
+    by mesh). Every rank gets the same number of batches (short shards wrap around) so that
+    DistributedDataParallel never waits on a rank that ran out."""
+    if not mesh_ids:
+        return []
+    order = np.random.default_rng([seed, epoch]).permutation(len(mesh_ids))
+    per_rank = -(-len(mesh_ids) // world)
+    shard = [mesh_ids[order[(rank + k * world) % len(order)]] for k in range(per_rank)]
+    return [tuple(shard[s:s + batch_size]) for s in range(0, len(shard), batch_size)]
+
+
+@dataclass
+class Sample:
+    graph: Graph
+    pairs: Tensor      # long (P, 2), local vertex indices
+    distances: Tensor  # float (P,)
+
+
+@dataclass
+class Batch:
+    """A disjoint union of meshes with its GeoPool hierarchy and sampled pairs (global indices)."""
+
+    hierarchy: Hierarchy
+    pairs: Tensor
+    distances: Tensor
+    mesh_ids: tuple[str, ...]
+
+    def to(self, device) -> "Batch":
+        return Batch(self.hierarchy.to(device), self.pairs.to(device, non_blocking=True),
+                     self.distances.to(device, non_blocking=True), self.mesh_ids)
+
+
+def sample_mesh(geometry: MeshGeometry, pairs: np.ndarray, distances: np.ndarray,
+                rng: np.random.Generator | None, num_pairs: int | None, rotate: bool) -> Sample:
+    """Pick ``num_pairs`` stored pairs (all if None or more than stored) and, with ``rotate``, rotate
+    coordinates and normals by one random rotation (distances are invariant, the network is not)."""
+    v, n = geometry.vertices, geometry.normals
+    if rotate:
+        r = random_rotation(rng).astype(np.float32)
+        v, n = v @ r.T, n @ r.T
+    if num_pairs is not None and num_pairs < len(pairs):
+        pick = rng.choice(len(pairs), num_pairs, replace=False)
+        pairs, distances = pairs[pick], distances[pick]
+    graph = Graph(pos=torch.from_numpy(np.ascontiguousarray(v)), normal=torch.from_numpy(np.ascontiguousarray(n)),
+                  edge_index=directed_edges(torch.from_numpy(geometry.edges)),
+                  batch=torch.zeros(len(v), dtype=torch.long))
+    return Sample(graph, torch.from_numpy(pairs), torch.from_numpy(distances))
+
+
+def make_batch(samples: list[Sample], mesh_ids, levels: int, sigma_c: float, sigma_n: float) -> Batch:
+    union, offsets = disjoint_union([s.graph for s in samples])
+    pairs = torch.cat([s.pairs + o for s, o in zip(samples, offsets.tolist())])
+    return Batch(build_hierarchy(union, levels, sigma_c, sigma_n), pairs,
+                 torch.cat([s.distances for s in samples]), tuple(mesh_ids))
+
+
+class BatchDataset(torch.utils.data.Dataset):
+    """Map-style dataset whose keys are ``(epoch, mesh_ids)``: the loader's workers build whole
+    batches, hierarchy included, so the training process only runs the network.
+
+    Args:
+        store_path, distance: the store to read (opened lazily in each worker process).
+        seed: data seed; sampling uses the rng stream (seed, epoch, mesh hash).
+        num_pairs: pairs per mesh (None: all stored pairs).
+        rotate: random rotation augmentation.
+        levels, sigma_c, sigma_n: the model's GeoPool settings.
+    """
+
+    def __init__(self, store_path, distance, seed, num_pairs, rotate, levels, sigma_c, sigma_n):
+        self.store_path, self.distance, self.seed = str(store_path), distance, seed
+        self.num_pairs, self.rotate = num_pairs, rotate
+        self.levels, self.sigma_c, self.sigma_n = levels, sigma_c, sigma_n
+        self._store, self._geometries = None, {}
+
+    @property
+    def store(self) -> GeodesicStore:
+        if self._store is None:
+            self._store = GeodesicStore(self.store_path, self.distance)
+        return self._store
+
+    def __getitem__(self, key) -> Batch:
+        epoch, mesh_ids = key
+        samples = [self.sample(epoch, m) for m in mesh_ids]
+        return make_batch(samples, mesh_ids, self.levels, self.sigma_c, self.sigma_n)
+
+    def sample(self, epoch: int, mesh_id: str) -> Sample:
+        rng = np.random.default_rng([self.seed, epoch + 1, mesh_hash(mesh_id)])  # epoch -1 -> 0 is val
+        pairs, distances = self.store.pairs(mesh_id)
+        return sample_mesh(self._geometry(mesh_id), pairs, distances, rng, self.num_pairs,
+                           self.rotate and epoch != VAL_EPOCH)
+
+    def _geometry(self, mesh_id: str) -> MeshGeometry:
+        # Geometry is small (~200 kB per 5k-vertex mesh) and kept; pairs (~7 MB) are read per use.
+        if mesh_id not in self._geometries:
+            self._geometries[mesh_id] = self.store.geometry(mesh_id)
+        return self._geometries[mesh_id]
+
+    def __getstate__(self):  # worker processes reopen the store themselves
+        return {**self.__dict__, "_store": None, "_geometries": {}}
+
+
+class EpochSampler(torch.utils.data.Sampler):
+    """Yields ``(epoch, batch)`` keys of the current epoch; ``set_epoch`` before each pass."""
+
+    def __init__(self, mesh_ids, seed, batch_size, rank=0, world=1):
+        self.mesh_ids, self.seed, self.batch_size, self.rank, self.world = mesh_ids, seed, batch_size, rank, world
+        self.epoch = 0
+
+    def set_epoch(self, epoch: int) -> None:
+        self.epoch = epoch
+
+    def batches(self, epoch: int):
+        return epoch_batches(self.mesh_ids, epoch, self.seed, self.batch_size, self.rank, self.world)
+
+    def __iter__(self):
+        return iter([(self.epoch, b) for b in self.batches(self.epoch)])
+
+    def __len__(self) -> int:
+        return len(self.batches(self.epoch))

@@ -1,0 +1,70 @@
+"""Mesh graphs as plain tensors: directed edges, disjoint unions of meshes, random rotations.
+
+Everything here is layout only (no learning): the layers in :mod:`gegnn.nn` consume these tensors.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from torch import Tensor
+
+__all__ = ["Graph", "directed_edges", "disjoint_union", "random_rotation"]
+
+
+@dataclass
+class Graph:
+    """One level of a (batched) mesh graph.
+
+    Attributes:
+        pos: vertex coordinates, float (N, 3).
+        normal: vertex normals, float (N, 3) (cluster means at coarse levels, so not exactly unit).
+        edge_index: directed edges, long (2, E); row 0 is the receiving vertex ``i``, row 1 the
+            neighbour ``j``. Every undirected mesh edge appears in both directions.
+        batch: index of the mesh each vertex belongs to, long (N,), non-decreasing.
+    """
+
+    pos: Tensor
+    normal: Tensor
+    edge_index: Tensor
+    batch: Tensor
+
+    @property
+    def num_nodes(self) -> int:
+        return self.pos.shape[0]
+
+    def to(self, device) -> "Graph":
+        return Graph(*(t.to(device, non_blocking=True) for t in
+                       (self.pos, self.normal, self.edge_index, self.batch)))
+
+
+def directed_edges(edges: Tensor) -> Tensor:
+    """Undirected edges (E, 2) -> edge_index (2, 2E) with both directions."""
+    e = edges.long()
+    return torch.cat([e, e.flip(1)], dim=0).t().contiguous()
+
+
+def disjoint_union(graphs: list[Graph]) -> tuple[Graph, Tensor]:
+    """Concatenate graphs into one graph without edges between them.
+
+    Returns the union and the vertex offset of each input graph (long (B,)).
+    """
+    sizes = torch.tensor([g.num_nodes for g in graphs])
+    offsets = torch.cumsum(sizes, 0) - sizes
+    union = Graph(
+        pos=torch.cat([g.pos for g in graphs]),
+        normal=torch.cat([g.normal for g in graphs]),
+        edge_index=torch.cat([g.edge_index + o for g, o in zip(graphs, offsets.tolist())], dim=1),
+        batch=torch.repeat_interleave(torch.arange(len(graphs)), sizes),
+    )
+    return union, offsets
+
+
+def random_rotation(rng: np.random.Generator) -> np.ndarray:
+    """A uniformly random rotation matrix (3, 3) (QR of a Gaussian matrix, sign-fixed, det +1)."""
+    q, r = np.linalg.qr(rng.standard_normal((3, 3)))
+    q = q * np.sign(np.diag(r))
+    if np.linalg.det(q) < 0:
+        q[:, 0] = -q[:, 0]
+    return q

@@ -1,0 +1,216 @@
+"""The GeGnn graph U-Net (Pang et al., "Learning the Geodesic Embedding with Graph Neural Networks",
+ACM TOG 2023): one forward pass gives an embedding per vertex; a small MLP decodes a pair of embeddings
+to a distance."""
+from __future__ import annotations
+
+import dataclasses
+import json
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from torch import Tensor, nn
+
+from geodata.mesh import Mesh, unique_edges, vertex_normals
+from geodata.stages.normalize import normalization
+
+from .graph import Graph, directed_edges
+from .nn import GeoConv, GeoPool, GeoUnpool, Hierarchy, ResBlocks, build_hierarchy
+
+__all__ = ["GeGnnConfig", "GeGnn", "DistanceDecoder"]
+
+
+@dataclass(frozen=True)
+class GeGnnConfig:
+    """Everything needed to rebuild a GeGnn; stored as JSON beside the weights in every checkpoint.
+
+    The defaults are the paper's network (the authors' public code for block counts and GroupNorm).
+    The flags below the first group switch on the paper's ablations.
+    """
+
+    in_channels: int = 6                      # normalized xyz + unit normal
+    channels: int = 256                       # width of every GeoConv
+    embed_dim: int = 256                      # per-vertex embedding
+    encoder_blocks: tuple[int, ...] = (2, 3, 3, 3, 2)  # ResBlocks after each of the pooling levels
+    decoder_blocks: tuple[int, ...] = (2, 3, 3, 3, 2)  # ResBlocks after each unpooling
+    groups: int = 4                           # GroupNorm groups
+    decoder_hidden: int = 256                 # distance MLP: embed_dim -> hidden -> hidden -> 1
+    sigma_c: float = 1 / 16                   # GeoPool cell size in xyz at the first level
+    sigma_n: float = 3 / 16                   # ... in normal space; inf = plain grid pooling
+    # Ablations
+    aggr: str = "max"                         # "max" | "mean" | "sum"
+    relative_position: bool = True            # v_i - v_j in GeoConv
+    edge_length: bool = True                  # |v_i - v_j| in GeoConv
+    decoder: str = "mlp"                      # "mlp" | "euclidean" (distance = ||e_i - e_j||)
+
+    def __post_init__(self):
+        object.__setattr__(self, "encoder_blocks", tuple(self.encoder_blocks))
+        object.__setattr__(self, "decoder_blocks", tuple(self.decoder_blocks))
+        if len(self.encoder_blocks) != len(self.decoder_blocks):
+            raise ValueError("encoder_blocks and decoder_blocks need one entry per pooling level each")
+        if self.channels % self.groups:
+            raise ValueError(f"channels ({self.channels}) must be divisible by groups ({self.groups})")
+        if self.decoder not in ("mlp", "euclidean"):
+            raise ValueError(f"decoder must be 'mlp' or 'euclidean', got {self.decoder!r}")
+
+    @property
+    def levels(self) -> int:
+        return len(self.encoder_blocks)
+
+    def to_json(self) -> str:
+        # inf (plain grid pooling) is written as the JSON extension Infinity, which json reads back.
+        return json.dumps(dataclasses.asdict(self))
+
+    @classmethod
+    def from_json(cls, text: str) -> "GeGnnConfig":
+        return cls(**json.loads(text))
+
+
+class DistanceDecoder(nn.Module):
+    r"""Distance between two embeddings.
+
+    ``"mlp"`` (paper): :math:`d_{ij} = |\mathrm{MLP}((\mathbf{e}_i - \mathbf{e}_j)^2)|`, symmetric by
+    construction. The final absolute value keeps predictions non-negative while, unlike a ReLU, never
+    cutting the gradient. ``"euclidean"`` (ablation): :math:`d_{ij} = \|\mathbf{e}_i - \mathbf{e}_j\|`.
+
+    Shapes:
+        - **input:** :math:`(P, D)`, :math:`(P, D)`
+        - **output:** :math:`(P,)`
+    """
+
+    def __init__(self, embed_dim: int, hidden: int, kind: str = "mlp"):
+        super().__init__()
+        self.kind = kind
+        self.mlp = nn.Sequential(nn.Linear(embed_dim, hidden), nn.ReLU(), nn.Linear(hidden, hidden),
+                                 nn.ReLU(), nn.Linear(hidden, 1)) if kind == "mlp" else None
+
+    def forward(self, a: Tensor, b: Tensor) -> Tensor:
+        sq = (a - b).square()
+        if self.mlp is None:
+            return (sq.sum(dim=1) + 1e-12).sqrt()  # eps: finite gradient at a == b
+        return self.mlp(sq).squeeze(1).abs()
+
+
+class GeGnn(nn.Module):
+    """Graph U-Net over a GeoPool hierarchy; ``GeGnn()`` is the paper's default network.
+
+    ``forward(hierarchy)`` returns per-vertex embeddings; ``predict`` adds the distance decoder;
+    ``embed(vertices, faces)`` runs the whole pipeline on one raw mesh.
+    """
+
+    def __init__(self, config: GeGnnConfig | None = None):
+        super().__init__()
+        self.config = config = config or GeGnnConfig()
+        c, conv = config.channels, dict(aggr=config.aggr, relative_position=config.relative_position,
+                                        edge_length=config.edge_length)
+        self.stem = GeoConv(config.in_channels, c, **conv)
+        self.stem_norm = nn.GroupNorm(config.groups, c)
+        self.pool, self.unpool = GeoPool(), GeoUnpool()
+        self.encoder = nn.ModuleList(ResBlocks(c, c, n, config.groups, **conv) for n in config.encoder_blocks)
+        # Decoder stages take [skip || upsampled], hence 2c in.
+        self.decoder = nn.ModuleList(ResBlocks(2 * c, c, n, config.groups, **conv)
+                                     for n in config.decoder_blocks)
+        self.head = nn.Sequential(nn.Linear(c, c, bias=False), nn.GroupNorm(config.groups, c), nn.ReLU(),
+                                  nn.Linear(c, config.embed_dim))
+        self.distance = DistanceDecoder(config.embed_dim, config.decoder_hidden, config.decoder)
+
+    # -- graphs -------------------------------------------------------------------------------------
+    @staticmethod
+    def mesh_graph(vertices, normals, edges) -> Graph:
+        """A single mesh (normalized vertices, unit normals, undirected edges) as a Graph."""
+        pos = torch.as_tensor(np.asarray(vertices, dtype=np.float32))
+        return Graph(pos=pos, normal=torch.as_tensor(np.asarray(normals, dtype=np.float32)),
+                     edge_index=directed_edges(torch.as_tensor(np.asarray(edges, dtype=np.int64))),
+                     batch=torch.zeros(len(pos), dtype=torch.long))
+
+    def hierarchy(self, graph: Graph) -> Hierarchy:
+        """The GeoPool hierarchy this network's config asks for."""
+        return build_hierarchy(graph, self.config.levels, self.config.sigma_c, self.config.sigma_n)
+
+    # -- network ------------------------------------------------------------------------------------
+    def forward(self, h: Hierarchy, pairs: Tensor | None = None) -> Tensor:
+        """Embeddings (N, embed_dim) of the level-0 vertices of ``h``; with ``pairs`` (P, 2) indexing
+        those vertices, the decoded distances (P,) instead (one call, so DistributedDataParallel sees
+        the decoder's parameters used inside forward)."""
+        e = self.head(self._unet(h))
+        if pairs is None:
+            return e
+        pairs = pairs.long()
+        return self.distance(e[pairs[:, 0]], e[pairs[:, 1]])
+
+    def _unet(self, h: Hierarchy) -> Tensor:
+        g = h.graphs[0]
+        x = torch.cat([g.pos, g.normal], dim=1)
+        x = torch.relu(self.stem_norm(self.stem(x, g.pos, g.edge_index)))
+        skips = []
+        for level, blocks in enumerate(self.encoder):
+            skips.append(x)
+            coarse = h.graphs[level + 1]
+            x = self.pool(x, h.clusters[level], coarse.num_nodes)
+            x = blocks(x, coarse.pos, coarse.edge_index)
+        for stage, blocks in enumerate(self.decoder):
+            level = h.depth - 1 - stage
+            fine = h.graphs[level]
+            x = torch.cat([skips[level], self.unpool(x, h.clusters[level])], dim=1)
+            x = blocks(x, fine.pos, fine.edge_index)
+        return x
+
+    # -- inference on raw meshes -----------------------------------------------------------------------
+    @torch.inference_mode()
+    def embed(self, vertices: np.ndarray, faces: np.ndarray, device=None, precision: str = "fp32"):
+        """Embed one mesh given as NumPy arrays in any units (one forward pass).
+
+        Vertices are normalized here (bounding box centered, longest half-extent 1, as in training);
+        normals and edges are computed here; distances from the result are in the input's units.
+        ``precision="bf16"`` runs the network under bf16 autocast: ~2x faster on CPUs with AVX512-BF16,
+        embeddings within ~1% (relative norm) of fp32.
+
+        Returns:
+            :class:`gegnn.embedding.Embedding`
+        """
+        from .embedding import Embedding
+
+        vertices, faces = _validated(vertices, faces)
+        center, scale = normalization(vertices)
+        scale = scale or 1.0  # a single point: keep units
+        mesh = Mesh((vertices - center) / scale, faces)
+        graph = self.mesh_graph(mesh.vertices, vertex_normals(mesh).astype(np.float32), unique_edges(mesh.faces))
+        device = torch.device(device) if device else next(self.parameters()).device
+        was_training = self.training
+        self.eval()
+        h = self.hierarchy(graph).to(device)
+        with torch.autocast(device.type, dtype=torch.bfloat16, enabled=precision == "bf16"):
+            features = self(h).float()
+        self.train(was_training)
+        return Embedding(features, self.distance, scale)
+
+    # -- checkpoints ------------------------------------------------------------------------------------
+    def save(self, path, metadata: dict | None = None) -> None:
+        """Single-file safetensors checkpoint: weights plus the config (JSON) in the metadata."""
+        from .checkpoint import save_checkpoint
+        save_checkpoint(path, self, metadata=metadata)
+
+    @classmethod
+    def from_checkpoint(cls, path, map_location="cpu") -> "GeGnn":
+        """Rebuild the network from a checkpoint file alone (config from its metadata)."""
+        from .checkpoint import load_checkpoint
+        ckpt = load_checkpoint(path, map_location)
+        model = cls(ckpt.config)
+        model.load_state_dict(ckpt.model_state)
+        return model.eval()
+
+
+def _validated(vertices, faces) -> tuple[np.ndarray, np.ndarray]:
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces)
+    if v.ndim != 2 or v.shape[1] != 3 or not len(v):
+        raise ValueError(f"vertices must be a non-empty (N, 3) array, got shape {v.shape}")
+    if f.ndim != 2 or f.shape[1] != 3 or not len(f):
+        raise ValueError(f"faces must be a non-empty (F, 3) array, got shape {f.shape}")
+    if not np.isfinite(v).all():
+        raise ValueError("vertices contain non-finite coordinates")
+    if f.min() < 0 or f.max() >= len(v):
+        raise ValueError("face index out of range")
+    return v, f.astype(np.int64)
+
+

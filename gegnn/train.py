@@ -1,0 +1,336 @@
+"""Training and evaluation loops (one file, nanoGPT style).
+
+Single process: ``gegnn train OUT --run RUN``. Multi-process: ``torchrun --nproc-per-node K -m gegnn.cli
+train OUT --run RUN`` (DistributedDataParallel; gloo on CPU, nccl on GPU; meshes sharded by rank).
+"""
+from __future__ import annotations
+
+import csv
+import dataclasses
+import logging
+import math
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+import torch.distributed as dist
+from tqdm import tqdm
+
+from .checkpoint import load_checkpoint, save_checkpoint
+from .data import VAL_EPOCH, BatchDataset, EpochSampler, GeodesicStore, split_meshes
+from .model import GeGnn, GeGnnConfig
+
+__all__ = ["TrainConfig", "train", "relative_error", "evaluate_store", "lr_at"]
+
+METRICS = ["epoch", "step", "lr", "train_mre", "val_mre", "seconds"]
+RESUME_KEEPS = ("epochs", "device", "workers")  # options a resumed run takes from the command line
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    store: str
+    run: str
+    epochs: int = 100
+    batch_size: int = 1              # meshes per step per process
+    lr: float = 1e-3
+    weight_decay: float = 0.01
+    warmup_epochs: float = 0.0
+    clip_grad: float = 0.0           # max gradient norm; 0 = off
+    distance: str = "geodesic"
+    pairs_per_mesh: int = 100_000
+    val_fraction: float = 0.1
+    rotate: bool = True
+    seed: int = 0
+    device: str = "auto"
+    workers: int = 0                 # loader processes (0: build batches in the training process)
+    resume: bool = False
+    init: str | None = None
+
+
+def relative_error(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """Per pair |d_pred - d| / (d + 1e-3): the paper's loss and metric (mean it for the MRE)."""
+    return (pred.float() - target).abs() / (target + 1e-3)
+
+
+def lr_at(step: int, total: int, base: float, warmup: int) -> float:
+    """Linear warm-up, then polynomial decay with power 0.9 to zero at ``total``."""
+    if warmup and step < warmup:
+        return base * (step + 1) / warmup
+    return base * max(0.0, 1 - step / max(total, 1)) ** 0.9
+
+
+# -- processes and devices ---------------------------------------------------------------------------
+@dataclass
+class Dist:
+    rank: int = 0
+    world: int = 1
+
+    @property
+    def main(self) -> bool:
+        return self.rank == 0
+
+
+def setup_distributed(device: torch.device) -> Dist:
+    """Join the process group torchrun describes (or one the caller already made)."""
+    if not dist.is_initialized() and int(os.environ.get("WORLD_SIZE", "1")) > 1:
+        dist.init_process_group("nccl" if device.type == "cuda" else "gloo")
+    if not dist.is_initialized():
+        return Dist()
+    return Dist(dist.get_rank(), dist.get_world_size())
+
+
+def pick_device(name: str) -> torch.device:
+    if name == "auto":
+        name = "cuda" if torch.cuda.is_available() else "cpu"
+    device = torch.device(name)
+    if device.type == "cuda":
+        device = torch.device("cuda", int(os.environ.get("LOCAL_RANK", "0")))
+        torch.cuda.set_device(device)
+    return device
+
+
+def all_sum(values: list[float], ctx: Dist, device) -> list[float]:
+    if ctx.world == 1:
+        return values
+    t = torch.tensor(values, dtype=torch.float64, device=device)
+    dist.all_reduce(t)
+    return t.tolist()
+
+
+# -- one step, one epoch ---------------------------------------------------------------------------
+def train_step(model, batch, optimizer, lr: float, clip_grad: float, device) -> float:
+    for group in optimizer.param_groups:
+        group["lr"] = lr
+    with torch.autocast("cuda", dtype=torch.bfloat16, enabled=device.type == "cuda"):
+        pred = model(batch.hierarchy, batch.pairs)
+    loss = relative_error(pred, batch.distances).mean()
+    optimizer.zero_grad(set_to_none=True)
+    loss.backward()
+    if clip_grad > 0:
+        torch.nn.utils.clip_grad_norm_(model.parameters(), clip_grad)
+    optimizer.step()
+    return loss.item()
+
+
+def train_epoch(model, loader, optimizer, cfg: TrainConfig, step: int, total: int, warmup: int,
+                device, ctx: Dist) -> tuple[float, int]:
+    model.train()
+    losses = []
+    bar = tqdm(loader, desc="train", leave=False, disable=not ctx.main, dynamic_ncols=True)
+    for batch in bar:
+        loss = train_step(model, batch.to(device), optimizer, lr_at(step, total, cfg.lr, warmup),
+                          cfg.clip_grad, device)
+        losses.append(loss)
+        step += 1
+        bar.set_postfix(mre=f"{loss:.4f}")
+    total_loss, count = all_sum([sum(losses), len(losses)], ctx, device)
+    return total_loss / max(count, 1), step
+
+
+@torch.no_grad()
+def validate(model, dataset: BatchDataset, mesh_ids, device, ctx: Dist) -> float:
+    """MRE over a fixed sample of pairs (same every epoch, no rotation) of this rank's share."""
+    model.eval()
+    err, count = 0.0, 0
+    for mesh_id in mesh_ids[ctx.rank::ctx.world]:
+        batch = dataset[(VAL_EPOCH, (mesh_id,))].to(device)
+        with torch.autocast("cuda", dtype=torch.bfloat16, enabled=device.type == "cuda"):
+            pred = model(batch.hierarchy, batch.pairs)
+        e = relative_error(pred, batch.distances)
+        err, count = err + e.sum().item(), count + e.numel()
+    err, count = all_sum([err, count], ctx, device)
+    return err / count if count else float("nan")
+
+
+# -- run directory ---------------------------------------------------------------------------------
+def run_logger(run: Path, main: bool) -> logging.Logger:
+    log = logging.getLogger(f"gegnn.train.{run.resolve()}")
+    log.setLevel(logging.INFO if main else logging.WARNING)
+    log.propagate = False
+    for h in list(log.handlers):
+        log.removeHandler(h)
+        h.close()
+    if main:
+        fmt = logging.Formatter("%(asctime)s %(message)s", "%Y-%m-%d %H:%M:%S")
+        for h in (logging.FileHandler(run / "train.log"), TqdmHandler()):
+            h.setFormatter(fmt)
+            log.addHandler(h)
+    return log
+
+
+class TqdmHandler(logging.Handler):
+    """Console lines that do not tear the progress bar."""
+
+    def emit(self, record):
+        tqdm.write(self.format(record))
+
+
+def read_metrics(run: Path, before_epoch: int) -> list[dict]:
+    path = run / "metrics.csv"
+    if not path.exists():
+        return []
+    with open(path, newline="") as f:
+        return [r for r in csv.DictReader(f) if int(r["epoch"]) < before_epoch]
+
+
+def write_metrics(run: Path, rows: list[dict]) -> None:
+    with open(run / "metrics.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, METRICS)
+        w.writeheader()
+        w.writerows(rows)
+
+
+def plot_curves(run: Path, rows: list[dict]) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 4))
+    epochs = [int(r["epoch"]) for r in rows]
+    for key in ("train_mre", "val_mre"):
+        ax.plot(epochs, [float(r[key]) for r in rows], marker=".", label=key)
+    ax.set(xlabel="epoch", ylabel="mean relative error", yscale="log")
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(run / "curves.png", dpi=100)
+    plt.close(fig)
+
+
+def rng_state() -> dict:
+    state = {"torch": torch.get_rng_state()}
+    if torch.cuda.is_available():
+        state.update({f"cuda{k}": s for k, s in enumerate(torch.cuda.get_rng_state_all())})
+    return state
+
+
+def restore_rng(state: dict) -> None:
+    if "torch" in state:
+        torch.set_rng_state(state["torch"])
+    cuda = [state[k] for k in sorted(k for k in state if k.startswith("cuda"))]
+    if cuda and torch.cuda.is_available():
+        torch.cuda.set_rng_state_all(cuda)
+
+
+# -- the run -------------------------------------------------------------------------------------
+def train(cfg: TrainConfig, model_config: GeGnnConfig | None = None) -> list[dict]:
+    """Train; returns the metrics rows. ``model_config`` is ignored when resuming or with ``init``."""
+    run = Path(cfg.run)
+    resume = load_checkpoint(run / "last.safetensors") if cfg.resume and (run / "last.safetensors").exists() \
+        else None
+    if resume is not None:  # continue with the run's own options
+        saved = {k: v for k, v in resume.metadata["train_config"].items() if k not in RESUME_KEEPS}
+        cfg = dataclasses.replace(cfg, **saved)
+    device = pick_device(cfg.device)
+    ctx = setup_distributed(device)
+    if ctx.main:
+        run.mkdir(parents=True, exist_ok=True)
+    if ctx.world > 1:
+        dist.barrier()
+    log = run_logger(run, ctx.main)
+
+    torch.manual_seed(cfg.seed)
+    model, optimizer, start_epoch, step, best = build_model(cfg, model_config, resume, device)
+    net = torch.nn.parallel.DistributedDataParallel(model) if ctx.world > 1 else model
+
+    store = GeodesicStore(cfg.store, cfg.distance)
+    train_ids, val_ids = split_meshes(store.mesh_ids, cfg.val_fraction)
+    if not train_ids:
+        raise ValueError(f"{cfg.store}: no committed meshes with {cfg.distance} distances")
+    dataset = BatchDataset(cfg.store, cfg.distance, cfg.seed, cfg.pairs_per_mesh, cfg.rotate,
+                           model.config.levels, model.config.sigma_c, model.config.sigma_n)
+    sampler = EpochSampler(train_ids, cfg.seed, cfg.batch_size, ctx.rank, ctx.world)
+    loader = make_loader(dataset, sampler, cfg.workers, device)
+    steps_per_epoch = len(sampler)
+    total, warmup = cfg.epochs * steps_per_epoch, round(cfg.warmup_epochs * steps_per_epoch)
+    log.info(f"{len(train_ids)} train / {len(val_ids)} val meshes, {ctx.world} process(es) on {device}, "
+             f"{steps_per_epoch} steps per epoch, {sum(p.numel() for p in model.parameters()):,} parameters")
+
+    rows = read_metrics(run, start_epoch) if ctx.main else []
+    last_plot = -math.inf
+    for epoch in range(start_epoch, cfg.epochs):
+        t0 = time.perf_counter()
+        sampler.set_epoch(epoch)
+        train_mre, step = train_epoch(net, loader, optimizer, cfg, step, total, warmup, device, ctx)
+        val_mre = validate(model, dataset, val_ids, device, ctx)
+        row = dict(epoch=str(epoch), step=str(step), lr=f"{lr_at(step - 1, total, cfg.lr, warmup):.3e}",
+                   train_mre=f"{train_mre:.6f}", val_mre=f"{val_mre:.6f}",
+                   seconds=f"{time.perf_counter() - t0:.2f}")
+        log.info(f"epoch {epoch} step {step} lr {float(row['lr']):.2e} train_mre {train_mre:.4f} "
+                 f"val_mre {val_mre:.4f} {float(row['seconds']):.1f}s")
+        score = val_mre if math.isfinite(val_mre) else train_mre
+        improved = score < best
+        best = min(best, score)
+        if ctx.main:
+            rows.append(row)
+            # Plotting costs ~0.5 s: at most every 30 s, and always after the last epoch.
+            plot = epoch == cfg.epochs - 1 or time.perf_counter() - last_plot > 30
+            last_plot = time.perf_counter() if plot else last_plot
+            save_run(run, model, optimizer, cfg, epoch, step, best, rows, improved, plot)
+    return rows
+
+
+def build_model(cfg: TrainConfig, model_config, resume, device):
+    """Model and optimizer, fresh, from ``--init`` weights, or restored from ``--resume``."""
+    if resume is not None:
+        model_config = resume.config
+    elif cfg.init:
+        init = load_checkpoint(cfg.init)
+        model_config = init.config
+    model = GeGnn(model_config or GeGnnConfig())
+    if cfg.init and resume is None:
+        model.load_state_dict(init.model_state)
+    model.to(device)
+    optimizer = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    if resume is None:
+        return model, optimizer, 0, 0, math.inf
+    model.load_state_dict(resume.model_state)
+    optimizer.load_state_dict(resume.optimizer_state)
+    restore_rng(resume.rng)
+    state = resume.metadata["trainer"]
+    return model, optimizer, state["epoch"] + 1, state["step"], state["best"]
+
+
+def save_run(run: Path, model, optimizer, cfg, epoch, step, best, rows, improved, plot=True) -> None:
+    meta = {"trainer": {"epoch": epoch, "step": step, "best": best},
+            "train_config": dataclasses.asdict(cfg), "metrics": rows[-1]}
+    if improved:
+        save_checkpoint(run / "best.safetensors", model, metadata=meta)
+    # last.safetensors is the resume point: written last, after metrics, so a kill between the two
+    # writes redoes the epoch instead of skipping it.
+    write_metrics(run, rows)
+    if plot:
+        plot_curves(run, rows)
+    save_checkpoint(run / "last.safetensors", model, optimizer, rng_state(), metadata=meta)
+
+
+def make_loader(dataset, sampler, workers: int, device):
+    # Workers are spawned, not forked: zarr v3 runs an asyncio thread that a fork would copy mid-state.
+    extra = dict(multiprocessing_context="spawn", persistent_workers=True, prefetch_factor=2) if workers else {}
+    return torch.utils.data.DataLoader(dataset, sampler=sampler, batch_size=None, collate_fn=_identity,
+                                       num_workers=workers, pin_memory=device.type == "cuda", **extra)
+
+
+def _identity(batch):
+    return batch
+
+
+# -- evaluation (the paper's protocol: all stored pairs) ------------------------------------------------
+@torch.no_grad()
+def evaluate_store(model: GeGnn, store_path, distance: str = "geodesic", mesh_ids=None, device="cpu",
+                   chunk: int = 65536) -> list[dict]:
+    """MRE of every committed mesh over all its stored pairs (sources x all vertices)."""
+    device = torch.device(device)
+    model.to(device).eval()
+    dataset = BatchDataset(store_path, distance, 0, None, False, model.config.levels,
+                           model.config.sigma_c, model.config.sigma_n)
+    rows = []
+    for mesh_id in tqdm(mesh_ids or dataset.store.mesh_ids, desc="eval", leave=False):
+        batch = dataset[(VAL_EPOCH, (mesh_id,))].to(device)
+        e = model(batch.hierarchy)
+        err = torch.cat([relative_error(model.distance(e[p[:, 0]], e[p[:, 1]]), d) for p, d in
+                         zip(batch.pairs.split(chunk), batch.distances.split(chunk))])
+        rows.append(dict(mesh_id=mesh_id, vertices=e.shape[0], pairs=err.numel(), mre=err.mean().item(),
+                         sum=err.sum().item()))
+    return rows

@@ -1,0 +1,46 @@
+import csv
+
+import numpy as np
+import trimesh
+from click.testing import CliRunner
+from gegnn_stores import ellipsoid
+
+from gegnn.cli import main
+
+SMALL = ["--channels", "16", "--blocks", "1,1,1,1,1", "--pairs-per-mesh", "200"]
+
+
+def test_train_eval_query(tiny_store, tmp_path):
+    runner = CliRunner()
+    run = tmp_path / "run"
+    result = runner.invoke(main, ["train", tiny_store, "--run", str(run), "--epochs", "2", "--batch-size", "2",
+                                  "--lr", "1e-3", "--seed", "1", "--device", "cpu", "--aggr", "mean",
+                                  "--plain-grid-pool", *SMALL])
+    assert result.exit_code == 0, result.output
+    assert "epoch 1 step 4" in (run / "train.log").read_text()
+    result = runner.invoke(main, ["train", tiny_store, "--run", str(run), "--epochs", "3", "--resume"])
+    assert result.exit_code == 0, result.output
+    with open(run / "metrics.csv") as f:
+        assert [r["epoch"] for r in csv.DictReader(f)] == ["0", "1", "2"]
+
+    result = runner.invoke(main, ["eval", str(run / "best.safetensors"), tiny_store, "--device", "cpu",
+                                  "--csv", str(tmp_path / "eval.csv")])
+    assert result.exit_code == 0, result.output
+    lines = result.stdout.strip().splitlines()  # the progress bar goes to stderr
+    assert lines[0].split() == ["mesh", "vertices", "pairs", "MRE", "%"] and lines[-1].startswith("overall")
+    assert len(lines) == 6  # header, four meshes, overall
+    with open(tmp_path / "eval.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert rows[-1]["mesh_id"] == "overall" and 0 < float(rows[-1]["mre"]) < 10
+
+    v, f = ellipsoid()
+    trimesh.Trimesh(v * 3.0, f, process=False).export(tmp_path / "m.obj")
+    result = runner.invoke(main, ["query", str(run / "last.safetensors"), str(tmp_path / "m.obj"),
+                                  "--source", "5", "-o", str(tmp_path / "field.npy")])
+    assert result.exit_code == 0, result.output
+    assert np.load(tmp_path / "field.npy").shape == (len(v),)
+
+
+def test_help_lists_commands():
+    result = CliRunner().invoke(main, ["--help"])
+    assert result.exit_code == 0 and {"train", "eval", "query"} <= set(result.output.split())

@@ -1,0 +1,123 @@
+import csv
+import socket
+from pathlib import Path
+
+import pytest
+import torch
+import torch.multiprocessing as mp
+from gegnn_stores import small_config
+
+import gegnn.train as gtrain
+from gegnn import GeGnn
+from gegnn.checkpoint import load_checkpoint
+from gegnn.data import BatchDataset
+from gegnn.train import TrainConfig, lr_at, relative_error, train, train_step
+
+CPU = torch.device("cpu")
+
+
+def overfit(store, steps, channels=64):
+    torch.manual_seed(0)
+    model = GeGnn(small_config(channels))
+    batch = BatchDataset(store, "geodesic", 0, None, False, 5, 1 / 16, 3 / 16)[(0, ("ellipsoid",))]
+    opt = torch.optim.AdamW(model.parameters(), lr=3e-3, weight_decay=0.01)
+    first = train_step(model, batch, opt, 3e-3, 0.0, CPU)
+    for s in range(1, steps):
+        train_step(model, batch, opt, lr_at(s, steps, 3e-3, 0), 0.0, CPU)
+    with torch.no_grad():
+        return first, relative_error(model(batch.hierarchy, batch.pairs), batch.distances).mean().item()
+
+
+def test_overfit_one_mesh_learns(one_mesh_store):
+    first, last = overfit(one_mesh_store, 50)
+    assert first > 0.5 and last < 0.10
+
+
+def test_overfit_one_mesh_below_3_percent(one_mesh_store):
+    assert overfit(one_mesh_store, 200)[1] < 0.03
+
+
+def config(store, run, **kw):
+    options = dict(epochs=2, batch_size=2, lr=2e-3, pairs_per_mesh=400, warmup_epochs=0.5, clip_grad=1.0)
+    return TrainConfig(store=store, run=str(run), **{**options, **kw})
+
+
+def weights(path):
+    return load_checkpoint(path).model_state
+
+
+def test_run_files_and_resume_equals_uninterrupted(tiny_store, tmp_path, monkeypatch):
+    full = train(config(tiny_store, tmp_path / "full"), small_config())
+    run = tmp_path / "killed"
+    original = gtrain.save_run
+
+    def save_then_die(*args, **kw):  # kill the run right after epoch 0 was saved
+        original(*args, **kw)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(gtrain, "save_run", save_then_die)
+    with pytest.raises(KeyboardInterrupt):
+        train(config(tiny_store, run), small_config())
+    monkeypatch.setattr(gtrain, "save_run", original)
+    resumed = train(config(tiny_store, run, resume=True), small_config(channels=8))  # config from ckpt
+
+    strip = [{k: v for k, v in r.items() if k != "seconds"} for r in full]
+    assert [{k: v for k, v in r.items() if k != "seconds"} for r in resumed] == strip
+    a, b = weights(tmp_path / "full" / "last.safetensors"), weights(run / "last.safetensors")
+    assert all(torch.equal(a[k], b[k]) for k in a)
+
+    out = tmp_path / "full"
+    assert {"metrics.csv", "last.safetensors", "best.safetensors", "curves.png", "train.log"} <= \
+        {p.name for p in out.iterdir()}
+    with open(out / "metrics.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert [int(r["epoch"]) for r in rows] == [0, 1] and list(rows[0]) == gtrain.METRICS
+    log = (out / "train.log").read_text()
+    assert "epoch 1 step 4 lr" in log and "train_mre" in log and "val_mre" in log
+
+
+def test_init_starts_from_weights(tiny_store, tmp_path):
+    train(config(tiny_store, tmp_path / "a", epochs=1), small_config())
+    rows = train(config(tiny_store, tmp_path / "b", epochs=1, init=str(tmp_path / "a" / "best.safetensors"),
+                        distance="biharmonic"), small_config(channels=8))
+    assert load_checkpoint(tmp_path / "b" / "last.safetensors").config == small_config() and len(rows) == 1
+
+
+# -- DistributedDataParallel with two gloo processes ------------------------------------------------
+def _ddp_worker(rank, port, store, out):
+    import torch.distributed as dist
+
+    torch.set_num_threads(1)
+    dist.init_process_group("gloo", init_method=f"tcp://127.0.0.1:{port}", rank=rank, world_size=2)
+    try:
+        torch.manual_seed(0)
+        model = GeGnn(small_config())
+        ddp = torch.nn.parallel.DistributedDataParallel(model)
+        ds = BatchDataset(store, "geodesic", 0, 500, True, 5, 1 / 16, 3 / 16)
+        batch = ds[(0, (["grid", "sphere"][rank],))]
+        relative_error(ddp(batch.hierarchy, batch.pairs), batch.distances).mean().backward()
+        if rank == 0:
+            torch.save({k: p.grad for k, p in model.named_parameters()}, Path(out) / "ddp_grads.pt")
+        train(TrainConfig(store=store, run=str(Path(out) / "run"), epochs=1, batch_size=1,
+                          pairs_per_mesh=200), small_config())
+    finally:
+        dist.destroy_process_group()
+
+
+def _free_port():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_ddp_two_processes_average_gradients(tiny_store, tmp_path):
+    mp.spawn(_ddp_worker, args=(_free_port(), tiny_store, str(tmp_path)), nprocs=2, join=True)
+    ddp_grads = torch.load(tmp_path / "ddp_grads.pt", weights_only=True)
+    torch.manual_seed(0)
+    model = GeGnn(small_config())  # single process, the union of both ranks' data in one batch
+    batch = BatchDataset(tiny_store, "geodesic", 0, 500, True, 5, 1 / 16, 3 / 16)[(0, ("grid", "sphere"))]
+    relative_error(model(batch.hierarchy, batch.pairs), batch.distances).mean().backward()
+    for k, p in model.named_parameters():
+        torch.testing.assert_close(ddp_grads[k], p.grad, atol=1e-6, rtol=1e-4)
+    with open(tmp_path / "run" / "metrics.csv") as f:
+        assert len(list(csv.DictReader(f))) == 1

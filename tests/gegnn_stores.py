@@ -1,0 +1,78 @@
+"""Test helpers for gegnn: small meshes, and geodata stores written with plain zarr in the contract layout
+(exact geodesics from tvb-gdist)."""
+from __future__ import annotations
+
+import gdist
+import numpy as np
+import trimesh
+import zarr
+
+from geodata.mesh import Mesh, unique_edges, vertex_normals
+from geodata.stages.normalize import normalize
+
+
+def ellipsoid(axes=(1.0, 0.7, 0.5), subdivisions=2) -> tuple[np.ndarray, np.ndarray]:
+    m = trimesh.creation.icosphere(subdivisions)
+    return np.asarray(m.vertices) * np.asarray(axes), np.asarray(m.faces)
+
+
+def flat_grid(n=12) -> tuple[np.ndarray, np.ndarray]:
+    """A triangulated square: geodesic distance equals Euclidean distance."""
+    x, y = np.meshgrid(np.linspace(-1, 1, n), np.linspace(-1, 1, n), indexing="ij")
+    v = np.stack([x.ravel(), y.ravel(), np.zeros(n * n)], axis=1)
+    k = np.arange(n * n).reshape(n, n)
+    a, b, c, d = k[:-1, :-1].ravel(), k[1:, :-1].ravel(), k[1:, 1:].ravel(), k[:-1, 1:].ravel()
+    return v, np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+
+
+def exact_pairs(v: np.ndarray, f: np.ndarray, sources: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Sources x all other vertices, exact polyhedral geodesics (tvb-gdist)."""
+    pairs, dists = [], []
+    targets = np.arange(len(v), dtype=np.int32)
+    for s in sources:
+        d = gdist.compute_gdist(v.astype(np.float64), f.astype(np.int32), np.array([s], np.int32), targets)
+        keep = targets != s
+        pairs.append(np.stack([np.full(keep.sum(), s), targets[keep]], 1))
+        dists.append(d[keep])
+    return np.concatenate(pairs).astype(np.uint32), np.concatenate(dists).astype(np.float32)
+
+
+def write_store(path, meshes: dict, num_sources: int = 8, biharmonic: bool = False, seed: int = 0) -> str:
+    """A store in the geodata layout; biharmonic/ holds the geodesics again (layout is what matters)."""
+    rng = np.random.default_rng(seed)
+    root = zarr.open_group(str(path), mode="w")
+    root.attrs["geodata_format"] = 1
+    meshes_group = root.create_group("meshes")
+    for mesh_id, (v, f) in meshes.items():
+        v = normalize(Mesh(v, f)).vertices
+        g = meshes_group.create_group(mesh_id)
+        g.attrs.update(source=f"{mesh_id}.obj")
+        for name, data in [("vertices", v.astype(np.float32)), ("faces", f.astype(np.int32)),
+                           ("normals", vertex_normals(Mesh(v, f)).astype(np.float32)), ("edges", unique_edges(f).astype(np.int32))]:
+            g.create_array(name, data=data)
+        sources = rng.choice(len(v), min(num_sources, len(v)), replace=False)
+        pairs, dists = exact_pairs(v, f, sources)
+        for kind in ["geodesic"] + (["biharmonic"] if biharmonic else []):
+            sub = g.create_group(kind)
+            sub.create_array("pairs", data=pairs)
+            sub.create_array("distances", data=dists)
+            if kind == "biharmonic":
+                sub.attrs["status"] = "ok"  # the biharmonic subgroup's own commit mark
+        g.attrs["status"] = "ok"  # commit mark, written last
+    root.create_group("failed").create_group("broken_mesh").attrs.update(stage="load", error="no faces")
+    meshes_group.create_group("unfinished").attrs["source"] = "half.obj"  # no status: must be skipped
+    return str(path)
+
+
+FOUR_MESHES = {
+    "ellipsoid_a": ellipsoid((1.0, 0.7, 0.5)),
+    "ellipsoid_b": ellipsoid((0.6, 1.0, 0.8)),
+    "sphere": ellipsoid((1.0, 1.0, 1.0)),
+    "grid": flat_grid(12),
+}
+
+
+def small_config(channels=16, blocks=1, **kw):
+    from gegnn import GeGnnConfig
+    return GeGnnConfig(channels=channels, embed_dim=channels, decoder_hidden=channels,
+                       encoder_blocks=(blocks,) * 5, decoder_blocks=(blocks,) * 5, **kw)
