@@ -26,7 +26,8 @@ def _blocks(ctx, param, value):
 
 @main.command()
 @click.argument("store", type=click.Path(exists=True, file_okay=False))
-@click.option("--run", "run_dir", required=True, type=click.Path(file_okay=False), help="Run directory.")
+@click.option("--run", "--run-dir", "run_dir", required=True, type=click.Path(file_okay=False),
+              help="Run directory (--run-dir is the same: torchrun mistakes a bare --run for its --run-path).")
 @click.option("--epochs", default=100, show_default=True)
 @click.option("--batch-size", default=1, show_default=True, help="Meshes per step (per process).")
 @click.option("--lr", default=1e-3, show_default=True, help="Peak learning rate (AdamW).")

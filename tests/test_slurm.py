@@ -57,7 +57,7 @@ def test_train_launches_torchrun_on_every_node(tmp_path):
     calls = run("train.sbatch", ["out", "run1", "--epochs", "3"], env, tmp_path)
     assert calls == [["srun", "torchrun", "--nnodes", "2", "--nproc-per-node", "4", "--rdzv-id", "42",
                       "--rdzv-backend", "c10d", "--rdzv-endpoint", "node7:29500",
-                      "-m", "gegnn.cli", "train", "out", "--run", "run1", "--epochs", "3"]]
+                      "-m", "gegnn.cli", "train", "out", "--run-dir", "run1", "--epochs", "3"]]
 
 
 def test_submit_chains_prepare_biharmonic_train(tmp_path):
