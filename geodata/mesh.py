@@ -6,7 +6,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["Mesh", "MeshError", "unique_edges", "edge_face_counts", "closed_manifold_problem",
-           "vertex_normals", "require_closed_manifold"]
+           "component_volumes", "vertex_normals", "require_closed_manifold"]
 
 
 class MeshError(Exception):
@@ -51,7 +51,7 @@ def edge_face_counts(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def closed_manifold_problem(mesh: Mesh) -> str | None:
-    """Why `mesh` is not a closed, edge-manifold, consistently oriented, vertex-manifold surface; None if it is.
+    """Why `mesh` is not a closed, edge- and vertex-manifold, consistently outward-oriented surface; None if it is.
 
     The exact-geodesic libraries segfault on non-manifold edges, so this runs before every native call.
     """
@@ -79,6 +79,8 @@ def closed_manifold_problem(mesh: Mesh) -> str | None:
     # vertex link holds; a pinched vertex (two fans) shows up as more link cycles than vertices.
     if _pinched_vertices(f, len(v)):
         return "non-manifold (pinched) vertices"
+    if (component_volumes(mesh) <= 0).any():
+        return "inward-oriented (or zero-volume) component"
     return None
 
 
@@ -102,6 +104,23 @@ def _pinched_vertices(faces: np.ndarray, n: int) -> bool:
     owner = keys // n
     comps_per_vertex = np.bincount(owner[np.unique(labels, return_index=True)[1]], minlength=n)
     return bool((comps_per_vertex > 1).any())
+
+
+def component_volumes(mesh: Mesh) -> np.ndarray:
+    """Signed volume of each edge-connected component of a closed mesh (outward: positive),
+    components ordered by their first face."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+
+    v, f = mesh.vertices, mesh.faces
+    n = len(v)
+    g = sp.coo_matrix((np.ones(2 * len(f)), (np.concatenate([f[:, 0], f[:, 1]]),
+                                             np.concatenate([f[:, 1], f[:, 2]]))), shape=(n, n))
+    _, labels = connected_components(g, directed=False)
+    _, first, inv = np.unique(labels[f[:, 0]], return_index=True, return_inverse=True)
+    a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
+    vol = np.bincount(inv.ravel(), weights=np.einsum("ij,ij->i", a, np.cross(b, c)) / 6.0)
+    return vol[np.argsort(np.argsort(first))]
 
 
 def require_closed_manifold(mesh: Mesh, stage: str) -> Mesh:

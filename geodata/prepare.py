@@ -104,7 +104,7 @@ def prepare_mesh(data: bytes, suffix: str, config: PrepareConfig, rng: np.random
 
     mesh = run("load", load_mesh_bytes, data, suffix, check=False)
     mesh = run("watertight", watertight, mesh)
-    mesh = run("remesh", remesh, mesh, config.target_vertices)
+    mesh = run("remesh", lambda m: remesh(m, config.target_vertices, collapse=config.collapse), mesh)
     mesh = run("simplify", simplify, mesh, config.collapse)
     mesh = run("normalize", normalize, mesh)
     pairs, distances = run("geodesic", exact_geodesic_pairs, mesh, config.pairs, rng,
