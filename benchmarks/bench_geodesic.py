@@ -31,7 +31,7 @@ def main():
     print(f"{'mesh':34s} {'verts':>6s} {'sources':>7s} {'gdist s':>8s} {'libigl s':>9s} {'ratio':>6s} {'max rel diff':>12s}")
     ratios = []
     for name in args.meshes:
-        mesh, _, _ = prepare_mesh((SHARED / name).read_bytes(), Path(name).suffix, config, np.random.default_rng(0))
+        mesh, *_ = prepare_mesh((SHARED / name).read_bytes(), Path(name).suffix, config, np.random.default_rng(0))
         sources = sample_sources(vertex_components(mesh), args.pairs, np.random.default_rng(0))
         timed = sources if args.sources is None else sources[: args.sources]
         seconds, results = {}, {}

@@ -84,8 +84,8 @@ def mesh_rng(seed: int, mesh_id: str) -> np.random.Generator:
 
 
 def prepare_mesh(data: bytes, suffix: str, config: PrepareConfig, rng: np.random.Generator,
-                 timings: dict | None = None) -> tuple[Mesh, np.ndarray, np.ndarray]:
-    """All stages on one file's bytes: the normalized mesh, its geodesic pairs and distances."""
+                 timings: dict | None = None) -> tuple[Mesh, np.ndarray, np.ndarray, np.ndarray]:
+    """All stages on one file's bytes: the normalized mesh, its geodesic pairs, distances, skipped sources."""
     timings = {} if timings is None else timings
 
     def run(stage, fn, *args, check=True):
@@ -107,18 +107,18 @@ def prepare_mesh(data: bytes, suffix: str, config: PrepareConfig, rng: np.random
     mesh = run("remesh", lambda m: remesh(m, config.target_vertices, collapse=config.collapse), mesh)
     mesh = run("simplify", simplify, mesh, config.collapse)
     mesh = run("normalize", normalize, mesh)
-    pairs, distances = run("geodesic", exact_geodesic_pairs, mesh, config.pairs, rng,
-                           config.geodesic_backend, check=False)
-    return mesh, pairs, distances
+    pairs, distances, skipped = run("geodesic", exact_geodesic_pairs, mesh, config.pairs, rng,
+                                    config.geodesic_backend, check=False)
+    return mesh, pairs, distances, skipped
 
 
 def _compute(task: MeshTask, config: PrepareConfig) -> tuple[dict, dict]:
-    """Runs in the isolated child: arrays to store and the timings."""
+    """Runs in the isolated child: arrays to store and attributes (timings, skipped sources)."""
     current_stage("load")
     data = Path(task.path).read_bytes()
     timings: dict = {}
-    mesh, pairs, distances = prepare_mesh(data, Path(task.path).suffix, config,
-                                          mesh_rng(config.seed, task.mesh_id), timings)
+    mesh, pairs, distances, skipped = prepare_mesh(data, Path(task.path).suffix, config,
+                                                   mesh_rng(config.seed, task.mesh_id), timings)
     arrays = {
         "vertices": mesh.vertices.astype(np.float32),
         "faces": mesh.faces.astype(np.int32),
@@ -127,7 +127,7 @@ def _compute(task: MeshTask, config: PrepareConfig) -> tuple[dict, dict]:
         "geodesic/pairs": pairs,
         "geodesic/distances": distances,
     }
-    return arrays, timings
+    return arrays, {"timings": timings, "skipped_sources": skipped.tolist()}
 
 
 def library_versions() -> dict:
@@ -145,19 +145,19 @@ def process_task(task: MeshTask, out: str, config: PrepareConfig) -> dict:
     start = time.perf_counter()
     row = {"mesh_id": task.mesh_id, "source": task.source}
     try:
-        arrays, timings = run_isolated(_compute, task, config, timeout=config.timeout)
+        arrays, computed = run_isolated(_compute, task, config, timeout=config.timeout)
     except MeshError as exc:
         store.record_failure(out, task.mesh_id, task.source, exc.stage, exc.reason)
         store.remove_mesh(out, task.mesh_id)
         return {**row, "status": "failed", "stage": exc.stage, "error": exc.reason,
                 "seconds": time.perf_counter() - start}
-    attrs = {"source": task.source, "sha256": task.sha256, "params": config.store_params(),
-             "timings": timings, "n_vertices": len(arrays["vertices"]), "n_faces": len(arrays["faces"]),
+    attrs = {"source": task.source, "sha256": task.sha256, "params": config.store_params(), **computed,
+             "n_vertices": len(arrays["vertices"]), "n_faces": len(arrays["faces"]),
              "n_pairs": len(arrays["geodesic/pairs"]), "versions": library_versions()}
     store.write_group(out, f"meshes/{task.mesh_id}", arrays, attrs)
     store.commit(out, f"meshes/{task.mesh_id}")
     store.clear_failure(out, task.mesh_id)
-    return {**row, "status": "ok", "timings": timings, "n_vertices": attrs["n_vertices"],
+    return {**row, "status": "ok", "timings": computed["timings"], "n_vertices": attrs["n_vertices"],
             "seconds": time.perf_counter() - start}
 
 
