@@ -6,7 +6,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["Mesh", "MeshError", "unique_edges", "edge_face_counts", "closed_manifold_problem",
-           "component_volumes", "vertex_normals", "require_closed_manifold"]
+           "component_volumes", "degenerate_faces", "vertex_normals", "require_closed_manifold"]
 
 
 class MeshError(Exception):
@@ -50,8 +50,22 @@ def edge_face_counts(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.unique(e, axis=0, return_counts=True)
 
 
-def closed_manifold_problem(mesh: Mesh) -> str | None:
-    """Why `mesh` is not a closed, edge- and vertex-manifold, consistently outward-oriented surface; None if it is.
+def degenerate_faces(mesh: Mesh) -> np.ndarray:
+    """Mask of (numerically) zero-area faces: twice the area below 1e-12 x the longest edge squared.
+
+    Remeshing and collapses can leave collinear triangles; cotangent weights and Kirsanov's exact
+    geodesics are undefined on them.
+    """
+    v, f = mesh.vertices, mesh.faces
+    e1, e2 = v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]
+    area2 = np.linalg.norm(np.cross(e1, e2), axis=1)
+    longest2 = max(np.einsum("ij,ij->i", e1, e1).max(), np.einsum("ij,ij->i", e2, e2).max(), 1e-300)
+    return area2 <= 1e-12 * longest2
+
+
+def closed_manifold_problem(mesh: Mesh, *, zero_area_ok: bool = False) -> str | None:
+    """Why `mesh` is not a closed, edge- and vertex-manifold, outward-oriented surface without zero-area
+    faces (unless `zero_area_ok`); None if it is.
 
     The exact-geodesic libraries segfault on non-manifold edges, so this runs before every native call.
     """
@@ -64,6 +78,8 @@ def closed_manifold_problem(mesh: Mesh) -> str | None:
         return "face index out of range"
     if (f[:, 0] == f[:, 1]).any() or (f[:, 1] == f[:, 2]).any() or (f[:, 2] == f[:, 0]).any():
         return "face with a repeated vertex"
+    if not zero_area_ok and degenerate_faces(mesh).any():
+        return f"{int(degenerate_faces(mesh).sum())} zero-area faces"
     _, counts = edge_face_counts(f)
     if (counts == 1).any():
         return f"{int((counts == 1).sum())} boundary edges"
@@ -123,8 +139,8 @@ def component_volumes(mesh: Mesh) -> np.ndarray:
     return vol[np.argsort(np.argsort(first))]
 
 
-def require_closed_manifold(mesh: Mesh, stage: str) -> Mesh:
-    problem = closed_manifold_problem(mesh)
+def require_closed_manifold(mesh: Mesh, stage: str, *, zero_area_ok: bool = False) -> Mesh:
+    problem = closed_manifold_problem(mesh, zero_area_ok=zero_area_ok)
     if problem is not None:
         raise MeshError(stage, problem)
     return mesh

@@ -88,7 +88,7 @@ def prepare_mesh(data: bytes, suffix: str, config: PrepareConfig, rng: np.random
     """All stages on one file's bytes: the normalized mesh, its geodesic pairs, distances, skipped sources."""
     timings = {} if timings is None else timings
 
-    def run(stage, fn, *args, check=True):
+    def run(stage, fn, *args, check=True, zero_area_ok=False):
         current_stage(stage)
         t = time.perf_counter()
         try:
@@ -98,12 +98,12 @@ def prepare_mesh(data: bytes, suffix: str, config: PrepareConfig, rng: np.random
         except Exception as exc:  # a library error is this stage's failure, in one line
             raise MeshError(stage, f"{type(exc).__name__}: {' '.join(str(exc).split())[:200]}") from None
         if check:  # invariants after every stage: native code downstream segfaults on broken meshes
-            require_closed_manifold(result, stage)
+            require_closed_manifold(result, stage, zero_area_ok=zero_area_ok)
         timings[stage] = round(time.perf_counter() - t, 4)
         return result
 
     mesh = run("load", load_mesh_bytes, data, suffix, check=False)
-    mesh = run("watertight", watertight, mesh)
+    mesh = run("watertight", watertight, mesh, zero_area_ok=True)  # remesh rebuilds the triangles
     mesh = run("remesh", lambda m: remesh(m, config.target_vertices, collapse=config.collapse), mesh)
     mesh = run("simplify", simplify, mesh, config.collapse)
     mesh = run("normalize", normalize, mesh)

@@ -1,4 +1,4 @@
-"""Stage 5, normalize: center the bounding box and scale the longest half-extent to exactly 1."""
+"""Stage 5, normalize: center the bounding box, scale the longest half-extent to exactly 1, round to float32."""
 from __future__ import annotations
 
 import numpy as np
@@ -25,4 +25,5 @@ def normalize(mesh: Mesh) -> Mesh:
     axis = int(np.argmax(v.max(axis=0) - v.min(axis=0)))
     v[np.argmax(v[:, axis]), axis] = 1.0
     v[np.argmin(v[:, axis]), axis] = -1.0
-    return Mesh(v, mesh.faces)
+    # The store keeps float32: round here so that distances are computed on exactly the stored mesh.
+    return Mesh(v.astype(np.float32), mesh.faces)

@@ -16,7 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from geodata.mesh import Mesh, MeshError, closed_manifold_problem, component_volumes
+from geodata.mesh import Mesh, MeshError, closed_manifold_problem
+from geodata.stages.repair import compact, meshset_mesh, remove_degenerate_faces
 
 __all__ = ["remesh", "simplify"]
 
@@ -34,25 +35,9 @@ _TOLERANCE = 0.06          # accept a remesh whose vertex count is within 6% of 
 _MAX_TRIES = 3
 
 
-def _compact(v: np.ndarray, f: np.ndarray) -> Mesh:
-    """Drop unreferenced vertices, keep the order of the others."""
-    used = np.zeros(len(v), dtype=bool)
-    used[f.ravel()] = True
-    if used.all():
-        return Mesh(v, f)
-    remap = np.cumsum(used) - 1
-    return Mesh(v[used], remap[f])
-
-
 def _area(v: np.ndarray, f: np.ndarray) -> float:
     a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
     return float(0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum())
-
-
-def _ms_mesh(ms) -> Mesh:
-    m = ms.current_mesh()
-    return _compact(np.asarray(m.vertex_matrix(), dtype=np.float64),
-                    np.asarray(m.face_matrix(), dtype=np.int64))
 
 
 def _isotropic(mesh: Mesh, length: float, iterations: int, checksurfdist: bool) -> Mesh:
@@ -62,7 +47,7 @@ def _isotropic(mesh: Mesh, length: float, iterations: int, checksurfdist: bool) 
     ms.add_mesh(pymeshlab.Mesh(vertex_matrix=mesh.vertices, face_matrix=mesh.faces))
     ms.meshing_isotropic_explicit_remeshing(iterations=iterations, targetlen=pymeshlab.PureValue(length),
                                             featuredeg=_FEATURE_DEG, checksurfdist=checksurfdist)
-    return _ms_mesh(ms)
+    return remove_degenerate_faces(meshset_mesh(ms))
 
 
 def _presimplify(mesh: Mesh, tolerance: float) -> Mesh:
@@ -90,7 +75,7 @@ def remesh(mesh: Mesh, target_vertices: int = 5000, *, collapse: float = 0.15,
     remeshing breaks it, a more conservative remesh (surface-distance checks on) is tried.
     """
     stage = "remesh"
-    problem = closed_manifold_problem(mesh)
+    problem = closed_manifold_problem(mesh, zero_area_ok=True)
     if problem is not None:
         raise MeshError(stage, f"input is not a closed manifold: {problem}")
     if target_vertices < 4:
@@ -134,8 +119,6 @@ def remesh(mesh: Mesh, target_vertices: int = 5000, *, collapse: float = 0.15,
             break
     if best is None:
         raise MeshError(stage, f"remeshing broke the surface: {last_problem}")
-    if component_volumes(best).sum() < 0:   # orientation is kept; guard anyway
-        best = Mesh(best.vertices, best.faces[:, ::-1])
     return best
 
 
@@ -159,7 +142,7 @@ def simplify(mesh: Mesh, collapse: float = 0.15) -> Mesh:
     try:
         v, f = fast_simplification.simplify(mesh.vertices, mesh.faces.astype(np.int32),
                                             target_count=target_faces)
-        out = _compact(np.asarray(v, dtype=np.float64), np.asarray(f, dtype=np.int64))
+        out = remove_degenerate_faces(compact(np.asarray(v, dtype=np.float64), np.asarray(f, dtype=np.int64)))
         problem = closed_manifold_problem(out)  # includes outward orientation of every component
         if problem is None:
             return out
@@ -174,7 +157,7 @@ def simplify(mesh: Mesh, collapse: float = 0.15) -> Mesh:
     ms.meshing_decimation_quadric_edge_collapse(targetfacenum=target_faces, preservetopology=True,
                                                 preservenormal=True, planarquadric=True,
                                                 qualitythr=0.3, autoclean=True)
-    out = _ms_mesh(ms)
+    out = remove_degenerate_faces(meshset_mesh(ms))
     problem = closed_manifold_problem(out)
     if problem is None:
         return out

@@ -64,8 +64,10 @@ def surface_samples(mesh: Mesh, n: int = 20000) -> np.ndarray:
     return ((1 - s)[:, None] * a[idx] + (s * (1 - r2))[:, None] * b[idx] + (s * r2)[:, None] * c[idx])
 
 
-def assert_valid(out: Mesh, target: int | None = None):
-    assert closed_manifold_problem(out) is None, closed_manifold_problem(out)
+def assert_valid(out: Mesh, target: int | None = None, *, zero_area_ok: bool = False):
+    """zero_area_ok for watertight output: its slivers are rebuilt by the remesh stage."""
+    problem = closed_manifold_problem(out, zero_area_ok=zero_area_ok)
+    assert problem is None, problem
     vols = component_volumes(out)
     assert (vols > 0).all(), vols
     if target is not None:
@@ -91,7 +93,7 @@ def assert_close_to_input(inp: Mesh, out: Mesh, h: float, cells: float = 2.0):
 
 def pipeline(mesh: Mesh, target: int = TARGET) -> tuple[Mesh, Mesh, Mesh]:
     wt = watertight(mesh)
-    assert_valid(wt)
+    assert_valid(wt, zero_area_ok=True)
     rm = remesh(wt, target)
     assert_valid(rm)
     return wt, rm, simplify(rm)
@@ -147,7 +149,7 @@ def test_intersecting_boxes_one_shell():
     b.apply_translation((0.2, 0.1, 0.05))
     inp = from_trimesh(a, b)
     wt = watertight(inp)
-    assert_valid(wt)
+    assert_valid(wt, zero_area_ok=True)
     vols = component_volumes(wt)
     assert len(vols) == 1
     union = 0.09 + 0.09 - 0.3 * 0.3 * 0.25        # overlap: 0.3 x 0.3 x 0.25
@@ -161,7 +163,7 @@ def test_nested_shell_and_speck_dropped():
     speck.apply_translation((0.9, 0.9, 0.9))
     inp = from_trimesh(outer, inner, speck)
     wt = watertight(inp)
-    assert_valid(wt)
+    assert_valid(wt, zero_area_ok=True)
     assert len(component_volumes(wt)) == 1
     assert wt.vertices.max() < 0.52                 # the speck is gone
 
@@ -170,7 +172,7 @@ def test_zero_thickness_sheet():
     quad = Mesh(np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float),
                 np.array([[0, 1, 2], [0, 2, 3]]))
     wt = watertight(quad)
-    assert_valid(wt)
+    assert_valid(wt, zero_area_ok=True)
     assert len(component_volumes(wt)) == 1
     thickness = wt.vertices[:, 2].max() - wt.vertices[:, 2].min()
     assert 0 < thickness < 4 * cell_size(quad)
@@ -181,7 +183,7 @@ def test_separate_parts_stay_separate():
     b = trimesh.creation.box(extents=(0.3, 0.3, 0.3))
     b.apply_translation((1.0, 0, 0))
     wt = watertight(from_trimesh(a, b))
-    assert_valid(wt)
+    assert_valid(wt, zero_area_ok=True)
     assert len(component_volumes(wt)) == 2
 
 
@@ -190,7 +192,7 @@ def test_watertight_keeps_units_and_inward_soup():
     box.apply_translation((1000.0, -50.0, 3.0))
     inp = Mesh(box.vertices, box.faces[:, ::-1])        # inward-facing input
     wt = watertight(inp)
-    assert_valid(wt)
+    assert_valid(wt, zero_area_ok=True)
     assert np.allclose(wt.vertices.min(axis=0), inp.vertices.min(axis=0), atol=2 * cell_size(inp))
     assert np.allclose(wt.vertices.max(axis=0), inp.vertices.max(axis=0), atol=2 * cell_size(inp))
 
@@ -272,6 +274,7 @@ REAL = {
     "table": "sweethome3d/table.obj",
     "door": "sweethome3d/door.obj",
     "bookcase (shelves)": "sweethome3d/bookcase.obj",
+    "front door (remeshing left 60 zero-area faces)": "sweethome3d/frontDoor.obj",
 }
 
 
