@@ -10,9 +10,18 @@ import click
 from .model import GeGnnConfig
 
 
-@click.group()
+@click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
+@click.version_option(package_name="geogegnn")
 def main():
-    """Learned geodesic embeddings (GeGnn): train on a geodata store, evaluate, query."""
+    """Learned geodesic embeddings (GeGnn): train on a geodata store, evaluate, query.
+
+    \b
+    Typical use:
+      gegnn train out/ --run runs/a --epochs 100
+      gegnn eval runs/a/best.safetensors out/
+      gegnn query runs/a/best.safetensors mesh.obj --source 0 -o field.ply
+      torchrun --nproc-per-node 4 -m gegnn.cli train out/ --run-dir runs/a
+    """
 
 
 def _blocks(ctx, param, value):
