@@ -1,6 +1,6 @@
 """GeGnn speed on CPU: training step, loader vs model, one embed, 1M queries, and the heat method.
 
-    /work/venv/bin/python benchmarks/bench_gegnn.py [--channels 256] [--queries 1000000] [--steps 3]
+    python benchmarks/bench_gegnn.py [--channels 256] [--queries 1000000] [--steps 3]
 
 Runs on a synthetic 5,000-vertex torus (no shared data needed). Reference timings (fp32 decoder, heat
 method) are measured in the same run; ratios are against them.
