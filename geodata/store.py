@@ -9,6 +9,7 @@ parents are created once, before any worker starts (concurrent creation races, z
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
 
 import numpy as np
@@ -31,21 +32,32 @@ def create_store(out: str | Path, params: dict) -> zarr.Group:
     rather than mixing two datasets under one name.
     """
     out = str(out)
-    try:
-        root = zarr.open_group(out, mode="r+")
-    except (FileNotFoundError, zarr.errors.GroupNotFoundError):
-        try:
-            root = zarr.open_group(out, mode="w-", attributes={"geodata_format": FORMAT, "params": params})
-        except zarr.errors.ContainsGroupError:  # another shard created it a moment ago
-            root = zarr.open_group(out, mode="r+")
+    root = _open_or_create_root(out, {"geodata_format": FORMAT, "params": params})
     if root.attrs.get("geodata_format") != FORMAT:
         raise StoreError(f"{out} is not a geodata store")
     if root.attrs.get("params") != params:
         diff = {k: v for k, v in root.attrs.get("params", {}).items() if params.get(k) != v}
         raise StoreError(f"{out} was made with {diff}; use another OUT for other parameters")
     for name in ("meshes", "failed"):
-        root.require_group(name)
+        try:
+            root.require_group(name)
+        except zarr.errors.ContainsGroupError:  # another shard created it between check and write
+            pass
     return root
+
+
+def _open_or_create_root(out: str, attrs: dict, attempts: int = 50) -> zarr.Group:
+    """Open the root group, or create it; several shards may start at the same moment."""
+    for _ in range(attempts):
+        try:
+            return zarr.open_group(out, mode="r+")
+        except (FileNotFoundError, zarr.errors.GroupNotFoundError, json.JSONDecodeError):
+            pass  # missing, or its metadata is being written this instant
+        try:
+            return zarr.open_group(out, mode="w-", attributes=attrs)
+        except (zarr.errors.ContainsGroupError, FileExistsError):
+            time.sleep(0.1)  # another shard is creating it right now: open it once written
+    raise StoreError(f"{out}: could not open or create the store")
 
 
 def open_store(out: str | Path) -> zarr.Group:
