@@ -47,7 +47,7 @@ def run_isolated(fn: Callable[..., Any], *args, timeout: float | None = None) ->
     if final is not None:
         raise MeshError(*final[1])
     if timed_out:
-        raise MeshError(stage, f"timed out after {timeout:.0f} s")
+        raise MeshError(stage, f"timed out after {timeout:g} s")
     if os.WIFSIGNALED(wait_status):
         name = signal.Signals(os.WTERMSIG(wait_status)).name
         raise MeshError(stage, f"native crash ({name}) in the worker process")

@@ -67,10 +67,9 @@ def test_errors_keep_their_stage_and_bugs_become_one_line():
 
 
 def test_timeout_kills_the_child():
-    start = time.monotonic()
-    with pytest.raises(MeshError, match="timed out"):
-        run_isolated(_sleep, timeout=0.5)
-    assert time.monotonic() - start < 20
+    with pytest.raises(MeshError) as info:
+        run_isolated(_sleep, timeout=0.5)  # the child would sleep 30 s
+    assert info.value.stage == "geodesic" and info.value.reason == "timed out after 0.5 s"
 
 
 def test_shards_partition_the_work():
