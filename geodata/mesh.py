@@ -78,8 +78,9 @@ def closed_manifold_problem(mesh: Mesh, *, zero_area_ok: bool = False) -> str | 
         return "face index out of range"
     if (f[:, 0] == f[:, 1]).any() or (f[:, 1] == f[:, 2]).any() or (f[:, 2] == f[:, 0]).any():
         return "face with a repeated vertex"
-    if not zero_area_ok and degenerate_faces(mesh).any():
-        return f"{int(degenerate_faces(mesh).sum())} zero-area faces"
+    n_degenerate = 0 if zero_area_ok else int(degenerate_faces(mesh).sum())
+    if n_degenerate:
+        return f"{n_degenerate} zero-area faces"
     _, counts = edge_face_counts(f)
     if (counts == 1).any():
         return f"{int((counts == 1).sum())} boundary edges"
