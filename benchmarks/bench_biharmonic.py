@@ -36,20 +36,8 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from geodata.biharmonic import biharmonic_pairs  # noqa: E402
+from geodata.examples import bumpy_sphere  # noqa: E402
 from geodata.mesh import Mesh, MeshError  # noqa: E402
-
-
-def synthetic_mesh(n: int, seed: int = 0) -> Mesh:
-    import trimesh
-
-    rng = np.random.default_rng(seed)
-    p = rng.normal(size=(n, 3))
-    p /= np.linalg.norm(p, axis=1, keepdims=True)
-    hull = trimesh.convex.convex_hull(p)
-    v = np.asarray(hull.vertices)
-    r = 1 + 0.15 * np.sin(3 * v[:, 0]) * np.cos(2 * v[:, 1]) + 0.075 * np.sin(5 * v[:, 2])
-    v = v * r[:, None] * np.array([1.3, 1.0, 0.8])
-    return Mesh(v, np.asarray(hull.faces))
 
 
 def load_mesh(path: str) -> Mesh:
@@ -121,7 +109,7 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=3, help="best of this many runs of the exact method")
     args = ap.parse_args()
 
-    cases = [(f"synthetic-sphere-{args.vertices}", lambda: synthetic_mesh(args.vertices))]
+    cases = [(f"synthetic-sphere-{args.vertices}", lambda: bumpy_sphere(args.vertices))]
     cases += [(Path(p).name, (lambda p=p: load_mesh(p))) for p in args.mesh]
     print(f"BLAS threads: {_T}; pairs requested: {args.pairs}")
     hdr = f"{'mesh':<28} {'N':>7} {'pairs':>8} {'exact s':>9} {'dense s':>9} {'ratio':>7} {'max rel err':>12} {'(float32)':>10}"

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-__all__ = ["example_soups", "write_examples"]
+__all__ = ["example_soups", "write_examples", "bumpy_sphere"]
 
 
 def _box(extents, center):
@@ -56,6 +56,21 @@ def example_soups() -> dict[str, trimesh.Trimesh]:
     crate = _box([0.6, 0.4, 0.3], [0, 0, 0.15])
     crate = trimesh.Trimesh(crate.vertices, crate.faces[np.asarray(crate.face_normals)[:, 2] < 0.9], process=False)
     return {"table": table, "chair": chair, "lamp": lamp, "shelf": shelf, "mug": mug, "crate": crate}
+
+
+def bumpy_sphere(n: int, seed: int = 0, amplitude: float = 0.15, stretch=(1.3, 1.0, 0.8),
+                 offset=(0.0, 0.0, 0.0)):
+    """An irregular closed mesh of about `n` vertices: the convex hull of random points on a sphere,
+    bumped and stretched (for tests and benchmarks that need irregular triangles, no data files)."""
+    from geodata.mesh import Mesh
+
+    rng = np.random.default_rng(seed)
+    p = rng.normal(size=(n, 3))
+    p /= np.linalg.norm(p, axis=1, keepdims=True)
+    hull = trimesh.convex.convex_hull(p)
+    v = np.asarray(hull.vertices)
+    r = 1 + amplitude * np.sin(3 * v[:, 0]) * np.cos(2 * v[:, 1]) + amplitude / 2 * np.sin(5 * v[:, 2])
+    return Mesh(v * r[:, None] * np.asarray(stretch) + np.asarray(offset), np.asarray(hull.faces))
 
 
 def write_examples(out_dir: str | Path) -> list[Path]:

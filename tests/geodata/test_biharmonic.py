@@ -12,6 +12,7 @@ import trimesh
 from scipy.sparse.csgraph import connected_components
 
 from geodata.biharmonic import BiharmonicSolver, biharmonic_distances, biharmonic_pairs
+from geodata.examples import bumpy_sphere
 from geodata.mesh import Mesh, MeshError
 
 
@@ -24,14 +25,7 @@ def icosphere() -> Mesh:
 
 def bumpy(n: int = 400, seed: int = 1, offset=(0.0, 0.0, 0.0)) -> Mesh:
     """Irregular closed mesh: convex hull of random sphere points, bumped and stretched."""
-    rng = np.random.default_rng(seed)
-    p = rng.normal(size=(n, 3))
-    p /= np.linalg.norm(p, axis=1, keepdims=True)
-    hull = trimesh.convex.convex_hull(p)
-    v = np.asarray(hull.vertices)
-    r = 1 + 0.2 * np.sin(3 * v[:, 0]) * np.cos(2 * v[:, 1]) + 0.1 * np.sin(5 * v[:, 2])
-    v = v * r[:, None] * np.array([1.4, 1.0, 0.7]) + np.asarray(offset)
-    return Mesh(v, np.asarray(hull.faces))
+    return bumpy_sphere(n, seed, amplitude=0.2, stretch=(1.4, 1.0, 0.7), offset=offset)
 
 
 def two_components() -> Mesh:
