@@ -6,6 +6,7 @@ import sys
 import time
 from collections import defaultdict
 from functools import partial
+from pathlib import Path
 
 import click
 import numpy as np
@@ -136,18 +137,23 @@ def _run(fn, tasks, what, jobs, backend, scheduler) -> list[dict]:
     return rows
 
 
+def _stage_seconds(timings: list[dict]) -> str:
+    """One line of mean / max seconds per stage over meshes' {stage: seconds} dicts."""
+    by_stage = defaultdict(list)
+    for t in timings:
+        for stage, seconds in t.items():
+            by_stage[stage].append(seconds)
+    return "seconds per mesh by stage (mean / max): " + ", ".join(
+        f"{s} {np.mean(v):.2f}/{np.max(v):.2f}" for s, v in by_stage.items())
+
+
 def _summary(rows: list[dict], n_done: int, n_failed: int) -> None:
     ok = [r for r in rows if r["status"] == "ok"]
     failed = [r for r in rows if r["status"] != "ok"]
-    stage_seconds = defaultdict(list)
-    for r in ok:
-        for stage, seconds in r["timings"].items():
-            stage_seconds[stage].append(seconds)
     lines = [f"summary: {len(ok)} ok, {len(failed)} failed this run; "
              f"{n_done} committed and {n_failed} failed before"]
-    if stage_seconds:
-        lines.append("seconds per mesh by stage (mean / max): " + ", ".join(
-            f"{s} {np.mean(v):.2f}/{np.max(v):.2f}" for s, v in stage_seconds.items()))
+    if ok:
+        lines.append(_stage_seconds([r["timings"] for r in ok]))
     for r in failed:
         lines.append(f"  failed {r['source']} [{r['stage']}] {r['error']}")
     for line in lines:
@@ -217,12 +223,7 @@ def info(out):
         npairs = np.array([a["n_pairs"] for a in ok.values()])
         click.echo(f"vertices per mesh: min {nv.min()}, mean {nv.mean():.0f}, max {nv.max()}; "
                    f"geodesic pairs: {npairs.sum():,} in all")
-        stages = defaultdict(list)
-        for a in ok.values():
-            for s, t in a.get("timings", {}).items():
-                stages[s].append(t)
-        click.echo("seconds per mesh by stage (mean / max): " + ", ".join(
-            f"{s} {np.mean(v):.2f}/{np.max(v):.2f}" for s, v in stages.items()))
+        click.echo(_stage_seconds([a.get("timings", {}) for a in ok.values()]))
     click.echo(f"size on disk: {_du(out) / 2**20:.1f} MiB")
     if incomplete:
         click.echo("incomplete (redone by the next run): " + ", ".join(incomplete))
@@ -233,8 +234,6 @@ def info(out):
 
 
 def _du(path) -> int:
-    from pathlib import Path
-
     p = Path(path)
     return sum(f.stat().st_size for f in p.rglob("*") if f.is_file()) if p.is_dir() else 0
 

@@ -5,7 +5,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Mesh", "MeshError", "unique_edges", "edge_face_counts", "closed_manifold_problem",
+__all__ = ["Mesh", "MeshError", "one_line", "unique_edges", "edge_face_counts", "closed_manifold_problem",
            "component_volumes", "degenerate_faces", "vertex_normals", "require_closed_manifold"]
 
 
@@ -16,6 +16,14 @@ class MeshError(Exception):
         super().__init__(f"{stage}: {reason}")
         self.stage = stage
         self.reason = reason
+
+
+def one_line(exc: BaseException, with_type: bool = True) -> str:
+    """An exception as one short line for logs and the store: 'Type: message' (or the message alone)."""
+    text = " ".join(str(exc).split())[:200]
+    if not with_type:
+        return text or type(exc).__name__
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
 
 @dataclass(frozen=True)

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import contextlib
 import faulthandler
+import hashlib
+import io
 import os
 import pickle
 import select
@@ -16,7 +18,7 @@ import sys
 import time
 from typing import Any, Callable, Iterable, Iterator
 
-from geodata.mesh import MeshError
+from geodata.mesh import MeshError, one_line
 
 __all__ = ["BACKENDS", "run_isolated", "parallel_map", "parse_shard", "in_shard"]
 
@@ -76,7 +78,7 @@ def _child(fn, args, write_fd: int) -> None:
         except MemoryError:
             message = ("error", ("unknown", "out of memory"))
         except Exception as exc:  # any bug must still become a one-line failure of this mesh
-            message = ("error", ("unknown", f"{type(exc).__name__}: {' '.join(str(exc).split())[:200]}"))
+            message = ("error", ("unknown", one_line(exc)))
         payload = pickle.dumps(message, protocol=pickle.HIGHEST_PROTOCOL)
         view = memoryview(payload)
         while view:
@@ -105,8 +107,6 @@ def _read_all(fd: int, timeout: float | None, pid: int) -> tuple[bytes, bool]:
 
 def _unpickle_all(data: bytes) -> list[tuple]:
     """The messages of a child, in order; a message cut short by the child's death ends the list."""
-    import io
-
     stream, messages = io.BytesIO(data), []
     while stream.tell() < len(data):
         try:
@@ -131,8 +131,6 @@ def parse_shard(text: str | None) -> tuple[int, int]:
 
 def in_shard(key: str, shard: tuple[int, int]) -> bool:
     """Stable assignment of a work item to one of N shards by a hash of its key."""
-    import hashlib
-
     k, n = shard
     return int.from_bytes(hashlib.sha1(key.encode()).digest()[:8], "big") % n == k
 

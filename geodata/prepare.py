@@ -16,7 +16,7 @@ import numpy as np
 
 from geodata import store
 from geodata.geodesic import exact_geodesic_pairs
-from geodata.mesh import Mesh, MeshError, require_closed_manifold, unique_edges, vertex_normals
+from geodata.mesh import Mesh, MeshError, one_line, require_closed_manifold, unique_edges, vertex_normals
 from geodata.parallel import current_stage, in_shard, run_isolated
 from geodata.stages.load import MESH_SUFFIXES, load_mesh_bytes
 from geodata.stages.normalize import normalize
@@ -96,7 +96,7 @@ def prepare_mesh(data: bytes, suffix: str, config: PrepareConfig, rng: np.random
         except MeshError:
             raise
         except Exception as exc:  # a library error is this stage's failure, in one line
-            raise MeshError(stage, f"{type(exc).__name__}: {' '.join(str(exc).split())[:200]}") from None
+            raise MeshError(stage, one_line(exc)) from None
         if check:  # invariants after every stage: native code downstream segfaults on broken meshes
             require_closed_manifold(result, stage, zero_area_ok=zero_area_ok)
         timings[stage] = round(time.perf_counter() - t, 4)

@@ -6,7 +6,7 @@ import io
 import numpy as np
 import trimesh
 
-from geodata.mesh import Mesh, MeshError
+from geodata.mesh import Mesh, MeshError, one_line
 
 __all__ = ["MESH_SUFFIXES", "load_mesh_bytes", "clean"]
 
@@ -25,7 +25,7 @@ def load_mesh_bytes(data: bytes, suffix: str) -> Mesh:
         loaded = trimesh.load(io.BytesIO(data), file_type=suffix.lstrip(".").lower(), process=False,
                               force="mesh")
     except Exception as exc:  # trimesh raises many types for garbage input
-        raise MeshError("load", f"unreadable as {suffix.lstrip('.').upper()}: {_one_line(exc)}") from None
+        raise MeshError("load", f"unreadable as {suffix.lstrip('.').upper()}: {one_line(exc, with_type=False)}") from None
     if not isinstance(loaded, trimesh.Trimesh):
         raise MeshError("load", "file holds no triangle mesh")
     vertices = np.asarray(loaded.vertices, dtype=np.float64).reshape(-1, 3)
@@ -60,7 +60,3 @@ def clean(vertices: np.ndarray, faces: np.ndarray) -> Mesh:
     used, compact = np.unique(faces, return_inverse=True)
     return Mesh(unique[used], compact.reshape(-1, 3))
 
-
-def _one_line(exc: Exception) -> str:
-    text = " ".join(str(exc).split()) or type(exc).__name__
-    return text[:200]
