@@ -31,9 +31,12 @@ class Checkpoint:
 
 
 def save_checkpoint(path, model, optimizer=None, rng: dict | None = None,
-                    metadata: dict | None = None) -> None:
-    """Write atomically (temp file, then rename) so a killed run never leaves a torn checkpoint."""
-    tensors = {k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()}
+                    metadata: dict | None = None, dtype: torch.dtype | None = None) -> None:
+    """Write atomically (temp file, then rename) so a killed run never leaves a torn checkpoint.
+
+    ``dtype`` (e.g. torch.float16) casts the floating-point weights: for shipping, not for resuming."""
+    tensors = {k: v.detach().cpu().to(dtype if dtype and v.is_floating_point() else v.dtype).contiguous()
+               for k, v in model.state_dict().items()}
     meta = {"format": FORMAT, "config": model.config.to_json()}
     if optimizer is not None:
         opt_tensors, meta["optimizer"] = _flatten_optimizer(optimizer.state_dict())

@@ -20,6 +20,7 @@ def main():
       gegnn train out/ --run runs/a --epochs 100
       gegnn eval runs/a/best.safetensors out/
       gegnn query runs/a/best.safetensors mesh.obj --source 0 -o field.ply
+      gegnn query --pretrained mesh.obj --source 0 --exact -o field.png
       torchrun --nproc-per-node 4 -m gegnn.cli train out/ --run-dir runs/a
     """
 
@@ -45,7 +46,10 @@ def _blocks(ctx, param, value):
 @click.option("--clip-grad", default=0.0, show_default=True, help="Max gradient norm (0: off).")
 @click.option("--distance", type=click.Choice(["geodesic", "biharmonic"]), default="geodesic", show_default=True)
 @click.option("--pairs-per-mesh", default=100_000, show_default=True, help="Sampled pairs per mesh and step.")
-@click.option("--val-fraction", default=0.1, show_default=True)
+@click.option("--val-fraction", default=0.1, show_default=True,
+              help="Meshes of STORE held out for validation (a fixed split by id hash).")
+@click.option("--val", "val_store", type=click.Path(exists=True, file_okay=False),
+              help="Validate on every mesh of this store instead (train on all of STORE).")
 @click.option("--no-rotate", is_flag=True, help="Disable random-rotation augmentation.")
 @click.option("--seed", default=0, show_default=True)
 @click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True)
@@ -60,14 +64,14 @@ def _blocks(ctx, param, value):
 @click.option("--plain-grid-pool", is_flag=True, help="Ablation: pool on xyz only (sigma_n = inf).")
 @click.option("--euclidean-decoder", is_flag=True, help="Ablation: distance = ||e_i - e_j||.")
 def train(store, run_dir, epochs, batch_size, lr, weight_decay, warmup_epochs, clip_grad, distance,
-          pairs_per_mesh, val_fraction, no_rotate, seed, device, workers, resume, init_ckpt, channels,
+          pairs_per_mesh, val_fraction, val_store, no_rotate, seed, device, workers, resume, init_ckpt, channels,
           blocks, aggr, no_edge_length, no_relative_position, plain_grid_pool, euclidean_decoder):
     """Train GeGnn on the geodata store STORE."""
     from .train import TrainConfig, train as run_training
 
     cfg = TrainConfig(store=store, run=run_dir, epochs=epochs, batch_size=batch_size, lr=lr,
                       weight_decay=weight_decay, warmup_epochs=warmup_epochs, clip_grad=clip_grad,
-                      distance=distance, pairs_per_mesh=pairs_per_mesh, val_fraction=val_fraction,
+                      distance=distance, pairs_per_mesh=pairs_per_mesh, val_fraction=val_fraction, val_store=val_store,
                       rotate=not no_rotate, seed=seed, device=device, workers=workers, resume=resume,
                       init=init_ckpt)
     extra = dict(encoder_blocks=blocks, decoder_blocks=blocks) if blocks else {}
@@ -107,30 +111,135 @@ def evaluate(checkpoint, store, distance, device, csv_path):
             w.writerows(rows + [overall])
 
 
-@main.command()
-@click.argument("checkpoint", type=click.Path(exists=True, dir_okay=False))
-@click.argument("mesh", type=click.Path(exists=True, dir_okay=False))
-@click.option("--source", required=True, type=int, help="Source vertex index.")
-@click.option("-o", "--output", type=click.Path(dir_okay=False), help="Write the field: .npy, or .ply (colored).")
-def query(checkpoint, mesh, source, output):
-    """Distance field from vertex SOURCE on MESH (any units; the field is in the mesh's units)."""
+@main.command(context_settings={"max_content_width": 100})
+@click.argument("files", nargs=-1, required=True, type=click.Path(exists=True, dir_okay=False),
+                metavar="[CHECKPOINT] MESH")
+@click.option("--pretrained", is_flag=True, help="Use the model shipped in the package (no CHECKPOINT).")
+@click.option("--source", type=int, help="Source vertex index (the file's own numbering).")
+@click.option("--pairs", "pairs_csv", type=click.Path(exists=True, dir_okay=False),
+              help="Answer the pairs of this CSV (two integer columns i,j; a header is allowed).")
+@click.option("-o", "--output", type=click.Path(dir_okay=False),
+              help="With --source: field.npy (per file vertex), field.ply (colored mesh) or field.png "
+                   "(rendered). With --pairs: a CSV i,j,distance (default: stdout).")
+@click.option("--exact", is_flag=True, help="Also compute the exact field (tvb-gdist) and report the error; "
+                                            "a PNG shows predicted | exact | relative error.")
+@click.option("--prepare", is_flag=True, help="Run the geodata pipeline first (watertight, remesh to ~5k "
+                                              "vertices: the meshes the model was trained on).")
+@click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True)
+@click.option("--precision", type=click.Choice(["fp32", "bf16"]), default="fp32", show_default=True,
+              help="Network precision (bf16: faster on recent CPUs and GPUs).")
+def query(files, pretrained, source, pairs_csv, output, exact, prepare, device, precision):
+    """Geodesic distances on MESH (OBJ/OFF/PLY/STL/GLB, any units) predicted by CHECKPOINT or --pretrained.
+
+    \b
+    Examples:
+      gegnn query --pretrained bunny.obj --source 0 -o field.png
+      gegnn query --pretrained bunny.obj --source 0 --exact -o compare.png
+      gegnn query runs/a/best.safetensors bunny.obj --pairs pairs.csv -o distances.csv
+
+    Distances are in the mesh's units. The PLY and PNG show the mesh the network ran on (with
+    --prepare, the remeshed one); .npy and CSV outputs use the file's vertex numbering.
+    """
     import numpy as np
-    import trimesh
+
+    from geodata.mesh import MeshError
 
     from .model import GeGnn
+    from .query import load_query_mesh, read_pairs
 
-    m = trimesh.load(mesh, force="mesh", process=False)  # process=True would reorder vertices
-    if not 0 <= source < len(m.vertices):
-        raise click.BadParameter(f"source must be in [0, {len(m.vertices)})", param_hint="--source")
-    field = GeGnn.from_checkpoint(checkpoint).embed(m.vertices, m.faces).field(source)
-    click.echo(f"{len(field)} vertices; distance from {source}: min {field.min():.4g} max {field.max():.4g}")
-    if output and Path(output).suffix == ".ply":
+    if pretrained == (len(files) == 2) or len(files) > 2:
+        raise click.UsageError("give CHECKPOINT MESH, or --pretrained MESH")
+    if (source is None) == (pairs_csv is None):
+        raise click.UsageError("give one of --source or --pairs")
+    mesh_path = files[-1]
+    suffix = Path(output).suffix.lower() if output else ""
+    allowed = (".csv",) if pairs_csv else (".npy", ".ply", ".png")
+    if output and suffix not in allowed:
+        raise click.BadParameter(f"expected one of {', '.join(allowed)}", param_hint="-o")
+    try:
+        qm = load_query_mesh(mesh_path, prepare=prepare)
+        pairs = read_pairs(pairs_csv) if pairs_csv else np.array([[source, 0]])
+        net_pairs = np.vectorize(qm.vertex, otypes=[np.int64])(pairs) if len(pairs) else pairs
+    except (MeshError, ValueError) as exc:
+        raise click.ClickException(f"{mesh_path}: {exc}") from None
+    src = int(net_pairs[0, 0])
+    exact_d = None
+    if exact and source is not None:  # before the network: the exact solver runs in a forked child
+        from .query import exact_field
+        try:
+            exact_d = exact_field(qm.mesh, src)
+        except MeshError as exc:
+            raise click.ClickException(f"{mesh_path}: --exact: {exc.reason}") from None
+
+    from .train import pick_device
+
+    model = GeGnn.pretrained() if pretrained else GeGnn.from_checkpoint(files[0])
+    emb = model.to(pick_device(device)).embed(qm.mesh.vertices, qm.mesh.faces, precision=precision)
+    if pairs_csv:
+        d = emb.distance(net_pairs[:, 0], net_pairs[:, 1])
+        lines = ["i,j,distance"] + [f"{i},{j},{x:.6g}" for (i, j), x in zip(pairs.tolist(), d.tolist())]
+        if output:
+            Path(output).write_text("\n".join(lines) + "\n")
+            click.echo(f"{len(pairs)} distances written to {output}")
+        else:
+            click.echo("\n".join(lines))
+        return
+
+    field = emb.field(src)
+    name = Path(mesh_path).name
+    click.echo(f"{name}: {len(qm.mesh.vertices)} vertices; distance from {source}: "
+               f"min {field.min():.4g} max {field.max():.4g}")
+    title = f"{name}, source {source}"
+    if exact_d is not None:
+        from .query import relative_errors
+        err = relative_errors(field, exact_d, qm.scale, src)
+        mre = float(np.nanmean(err))
+        click.echo(f"mean relative error vs exact: {100 * mre:.2f}% (median {100 * np.nanmedian(err):.2f}%, "
+                   f"max {100 * np.nanmax(err):.1f}%)")
+        title += f": MRE {100 * mre:.2f}%"
+    if suffix == ".npy":
+        np.save(output, qm.to_file(field))
+    elif suffix == ".ply":
         import matplotlib
+        import trimesh
 
-        m.visual.vertex_colors = (matplotlib.colormaps["viridis"](field / field.max()) * 255).astype(np.uint8)
-        m.export(output)
-    elif output:
-        np.save(output, field)
+        colors = (matplotlib.colormaps["viridis"](field / max(field.max(), 1e-30)) * 255).astype(np.uint8)
+        trimesh.Trimesh(qm.mesh.vertices, qm.mesh.faces, vertex_colors=colors, process=False).export(output)
+    elif suffix == ".png":
+        from .render import Panel, save_panels
+
+        top = float(np.nanmax(exact_d)) if exact_d is not None else float(field.max())
+        panels = [Panel(field, "predicted", vmin=0, vmax=top)]
+        if exact_d is not None:
+            panels += [Panel(np.nan_to_num(exact_d, nan=top), "exact", vmin=0, vmax=top),
+                       Panel(np.nan_to_num(err, nan=0.0), "relative error", "magma", "|pred - exact| / exact",
+                             0, 0.1, isolines=0)]
+        save_panels(output, qm.mesh.vertices, qm.mesh.faces, [panels], source=src, suptitle=title)
+    if output:
+        click.echo(f"written {output}")
+
+
+@main.command()
+@click.argument("checkpoint", type=click.Path(exists=True, dir_okay=False))
+@click.argument("output", type=click.Path(dir_okay=False))
+@click.option("--dtype", type=click.Choice(["fp16", "bf16", "fp32"]), default="fp16", show_default=True)
+def export(checkpoint, output, dtype):
+    """Weights-only copy of CHECKPOINT for shipping: no optimizer or RNG state, weights in DTYPE.
+
+    Keeps the config and the training metadata (epoch, metrics, options)."""
+    import torch
+
+    from .checkpoint import load_checkpoint, save_checkpoint
+    from .model import GeGnn
+
+    ckpt = load_checkpoint(checkpoint)
+    model = GeGnn(ckpt.config)
+    model.load_state_dict(ckpt.model_state)
+    torch_dtype = {"fp16": torch.float16, "bf16": torch.bfloat16, "fp32": torch.float32}[dtype]
+    save_checkpoint(output, model, metadata={**ckpt.metadata, "exported_from": Path(checkpoint).name,
+                                             "dtype": dtype}, dtype=torch_dtype)
+    click.echo(f"{output}: {Path(output).stat().st_size / 2**20:.2f} MiB, "
+               f"{sum(p.numel() for p in model.parameters()):,} parameters in {dtype}")
 
 
 if __name__ == "__main__":

@@ -19,6 +19,8 @@ from .nn import GeoConv, GeoPool, GeoUnpool, Hierarchy, ResBlocks, build_hierarc
 
 __all__ = ["GeGnnConfig", "GeGnn", "DistanceDecoder"]
 
+PRETRAINED = "gegnn-classic-v1.safetensors"  # in gegnn/weights/, made by `gegnn export`
+
 
 @dataclass(frozen=True)
 class GeGnnConfig:
@@ -191,12 +193,20 @@ class GeGnn(nn.Module):
         save_checkpoint(path, self, metadata=metadata)
 
     @classmethod
+    def pretrained(cls, map_location="cpu") -> "GeGnn":
+        """The model shipped in the package (fp16 weights; see docs/model-card.md for data and accuracy)."""
+        from importlib.resources import as_file, files
+
+        with as_file(files("gegnn") / "weights" / PRETRAINED) as path:
+            return cls.from_checkpoint(path, map_location)
+
+    @classmethod
     def from_checkpoint(cls, path, map_location="cpu") -> "GeGnn":
         """Rebuild the network from a checkpoint file alone (config from its metadata)."""
         from .checkpoint import load_checkpoint
         ckpt = load_checkpoint(path, map_location)
         model = cls(ckpt.config)
-        model.load_state_dict(ckpt.model_state)
+        model.load_state_dict(ckpt.model_state)  # fp16 weights are cast to the model's fp32
         return model.eval()
 
 

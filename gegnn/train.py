@@ -41,6 +41,7 @@ class TrainConfig:
     distance: str = "geodesic"
     pairs_per_mesh: int = 100_000
     val_fraction: float = 0.1
+    val_store: str | None = None    # validate on every mesh of this store instead of a split of `store`
     rotate: bool = True
     seed: int = 0
     device: str = "auto"
@@ -235,11 +236,15 @@ def train(cfg: TrainConfig, model_config: GeGnnConfig | None = None) -> list[dic
     net = torch.nn.parallel.DistributedDataParallel(model) if ctx.world > 1 else model
 
     store = GeodesicStore(cfg.store, cfg.distance)
-    train_ids, val_ids = split_meshes(store.mesh_ids, cfg.val_fraction)
+    if cfg.val_store:
+        train_ids, val_ids = store.mesh_ids, GeodesicStore(cfg.val_store, cfg.distance).mesh_ids
+    else:
+        train_ids, val_ids = split_meshes(store.mesh_ids, cfg.val_fraction)
     if not train_ids:
         raise ValueError(f"{cfg.store}: no committed meshes with {cfg.distance} distances")
-    dataset = BatchDataset(cfg.store, cfg.distance, cfg.seed, cfg.pairs_per_mesh, cfg.rotate,
-                           model.config.levels, model.config.sigma_c, model.config.sigma_n)
+    dataset, val_dataset = (BatchDataset(path, cfg.distance, cfg.seed, cfg.pairs_per_mesh, cfg.rotate,
+                                         model.config.levels, model.config.sigma_c, model.config.sigma_n)
+                            for path in (cfg.store, cfg.val_store or cfg.store))
     sampler = EpochSampler(train_ids, cfg.seed, cfg.batch_size, ctx.rank, ctx.world)
     loader = make_loader(dataset, sampler, cfg.workers, device)
     steps_per_epoch = len(sampler)
@@ -253,7 +258,7 @@ def train(cfg: TrainConfig, model_config: GeGnnConfig | None = None) -> list[dic
         t0 = time.perf_counter()
         sampler.set_epoch(epoch)
         train_mre, step = train_epoch(net, loader, optimizer, cfg, step, total, warmup, device, ctx)
-        val_mre = validate(model, dataset, val_ids, device, ctx)
+        val_mre = validate(model, val_dataset, val_ids, device, ctx)
         row = dict(epoch=str(epoch), step=str(step), lr=f"{lr_at(step - 1, total, cfg.lr, warmup):.3e}",
                    train_mre=f"{train_mre:.6f}", val_mre=f"{val_mre:.6f}",
                    seconds=f"{time.perf_counter() - t0:.2f}")

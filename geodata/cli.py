@@ -33,6 +33,7 @@ def _setup_logging(log_file: str | None) -> None:
     console.setFormatter(logging.Formatter("geodata %(levelname)s %(message)s"))
     log.addHandler(console)
     if log_file:
+        Path(log_file).parent.mkdir(parents=True, exist_ok=True)
         handler = logging.FileHandler(log_file)
         handler.setFormatter(logging.Formatter("%(asctime)s geodata %(levelname)s %(message)s"))
         log.addHandler(handler)
@@ -66,6 +67,20 @@ def _scale_options(fn):
     return fn
 
 
+def _read_list(ctx, param, value):
+    from geodata.prepare import read_list
+
+    return None if value is None else read_list(value)
+
+
+def _list_options(fn):
+    """--include/--exclude LIST: select files under RAW_DIR by relative path."""
+    fn = click.option("--exclude", type=click.Path(exists=True, dir_okay=False), callback=_read_list,
+                      help="Skip the files listed (paths relative to RAW_DIR, one a line, # comments).")(fn)
+    return click.option("--include", type=click.Path(exists=True, dir_okay=False), callback=_read_list,
+                        help="Only the files listed (same format as --exclude).")(fn)
+
+
 @click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
 @click.version_option(package_name="geogegnn")
 def main():
@@ -94,15 +109,17 @@ def main():
               help="Exact geodesic code: tvb-gdist (fast) or libigl (reference); both give the same distances.")
 @click.option("--timeout", default=1800.0, show_default=True, help="Seconds one mesh may take before it counts as failed.")
 @click.option("--retry-failed", is_flag=True, help="Try again the meshes recorded under failed/.")
+@_list_options
 @_scale_options
 def prepare(raw_dir, out, pairs, target_vertices, collapse, seed, geodesic_backend, timeout, retry_failed,
-            jobs, backend, scheduler, shard, log_file):
+            include, exclude, jobs, backend, scheduler, shard, log_file):
     """Prepare every mesh file under RAW_DIR (OBJ/OFF/PLY/STL/GLB, searched recursively) into store OUT.
 
     Stages: load, watertight (manifold3d), isotropic remesh (pymeshlab), QEM edge collapse,
     normalize to [-1,1], exact geodesic pairs. A mesh counts once its group is committed; a rerun
     skips committed meshes and redoes the rest, so a killed run loses nothing. Bad input is recorded
-    under failed/ with the stage and reason and the batch goes on.
+    under failed/ with the stage and reason and the batch goes on. Several RAW_DIRs may be prepared
+    into one store (same options): ids come from file contents.
     """
     from geodata.prepare import PrepareConfig, process_task, select_tasks
 
@@ -112,7 +129,7 @@ def prepare(raw_dir, out, pairs, target_vertices, collapse, seed, geodesic_backe
         store.create_store(out, config.store_params())
     except store.StoreError as exc:
         raise click.ClickException(str(exc)) from None
-    tasks, n_done, n_failed = select_tasks(raw_dir, out, shard, retry_failed)
+    tasks, n_done, n_failed = select_tasks(raw_dir, out, shard, retry_failed, include, exclude)
     log.info("prepare %s -> %s: %d to do, %d already committed, %d failed before%s", raw_dir, out, len(tasks),
              n_done, n_failed, "" if shard == (0, 1) else f" (shard {shard[0]}/{shard[1]})")
     rows = _run(partial(process_task, out=out, config=config), tasks, "prepare", jobs, backend, scheduler)
@@ -187,6 +204,44 @@ def biharmonic(out, pairs, seed, timeout, retry_failed, jobs, backend, scheduler
     log.info("biharmonic %s: %d to do, %d already done, %d failed before", out, len(tasks), n_done, n_failed)
     rows = _run(partial(process_biharmonic, out=out, config=config), tasks, "biharmonic", jobs, backend, scheduler)
     _summary(rows, n_done, n_failed)
+
+
+@main.command()
+@click.argument("raw_dir", type=click.Path(exists=True))
+@click.argument("out_dir", type=click.Path(file_okay=False))
+@click.option("--variants", "-k", default=2, show_default=True, type=click.IntRange(1),
+              help="Variants written per input file.")
+@click.option("--seed", default=0, show_default=True, help="Seed (per file: seed + content hash + variant).")
+@click.option("--jobs", "-j", default=1, show_default=True, type=click.IntRange(1), help="Files at once.")
+@_list_options
+def augment(raw_dir, out_dir, variants, seed, jobs, include, exclude):
+    """Write randomized variants of every mesh under RAW_DIR to OUT_DIR, for `geodata prepare`.
+
+    
+    Each variant: anisotropic scaling along a random frame, and with probability 1/2 each a bend,
+    a twist, and 1-3 cuts that open holes. Made before prepare, so the variants' distances are exact.
+    Output: OUT_DIR/<relative path>.aug<k>.ply; a rerun rewrites the same files.
+    """
+    from joblib import Parallel, delayed
+
+    from geodata.augment import AugmentConfig, augment_file
+    from geodata.prepare import discover
+
+    _setup_logging(None)
+    cfg = AugmentConfig(variants=variants, seed=seed)
+    root = Path(raw_dir)
+    base = root.parent if root.is_file() else root
+    sources = discover(raw_dir, include, exclude)
+    rows = []
+    calls = (delayed(augment_file)(str(base / s), s, out_dir, cfg) for s in sources)
+    for row in tqdm(Parallel(n_jobs=jobs, return_as="generator")(calls), total=len(sources), desc="augment",
+                    unit="file", disable=None, dynamic_ncols=True):
+        rows.append(row)
+        if row["status"] != "ok":
+            log.warning("FAILED %s %s", row["source"], row["error"])
+    ok = sum(r["status"] == "ok" for r in rows)
+    log.info("summary: %d files ok, %d failed, %d variants written to %s", ok, len(rows) - ok,
+             sum(len(r.get("written", [])) for r in rows), out_dir)
 
 
 @main.command()

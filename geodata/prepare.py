@@ -23,8 +23,8 @@ from geodata.stages.normalize import normalize
 from geodata.stages.remesh import remesh, simplify
 from geodata.stages.watertight import watertight
 
-__all__ = ["PrepareConfig", "MeshTask", "discover", "make_tasks", "mesh_rng", "prepare_mesh",
-           "process_task", "STAGES"]
+__all__ = ["PrepareConfig", "MeshTask", "discover", "read_list", "make_tasks", "mesh_rng", "run_stage",
+           "prepare_geometry", "prepare_mesh", "process_task", "STAGES"]
 
 STAGES = ("load", "watertight", "remesh", "simplify", "normalize", "geodesic")
 LIBRARIES = ("trimesh", "manifold3d", "pymeshlab", "fast-simplification", "tvb-gdist", "libigl", "numpy")
@@ -54,13 +54,22 @@ class MeshTask:
     sha256: str
 
 
-def discover(raw_dir: str | Path) -> list[str]:
-    """Mesh files under raw_dir, recursively, as sorted relative POSIX paths."""
+def discover(raw_dir: str | Path, include: set[str] | None = None, exclude: set[str] | None = None) -> list[str]:
+    """Mesh files under raw_dir, recursively, as sorted relative POSIX paths; only those in
+    ``include`` (when given) and none in ``exclude``."""
     root = Path(raw_dir)
     if root.is_file():
-        return [root.name] if root.suffix.lower() in MESH_SUFFIXES else []
-    return sorted(p.relative_to(root).as_posix() for p in root.rglob("*")
-                  if p.is_file() and p.suffix.lower() in MESH_SUFFIXES)
+        found = [root.name] if root.suffix.lower() in MESH_SUFFIXES else []
+    else:
+        found = sorted(p.relative_to(root).as_posix() for p in root.rglob("*")
+                       if p.is_file() and p.suffix.lower() in MESH_SUFFIXES)
+    return [s for s in found if (include is None or s in include) and s not in (exclude or ())]
+
+
+def read_list(path: str | Path) -> set[str]:
+    """Relative mesh paths, one a line; blank lines and `#` comments are ignored."""
+    lines = (line.split("#", 1)[0].strip() for line in Path(path).read_text().splitlines())
+    return {line for line in lines if line}
 
 
 def make_tasks(raw_dir: str | Path, sources: list[str]) -> list[MeshTask]:
@@ -83,32 +92,40 @@ def mesh_rng(seed: int, mesh_id: str) -> np.random.Generator:
     return np.random.default_rng([seed, key])
 
 
+def run_stage(timings: dict, stage: str, fn, *args, check: bool = True, zero_area_ok: bool = False):
+    """One stage: a library error becomes MeshError(stage, one line); the result's invariants are
+    checked (native code downstream segfaults on broken meshes); the seconds go to ``timings``."""
+    current_stage(stage)
+    t = time.perf_counter()
+    try:
+        result = fn(*args)
+    except MeshError:
+        raise
+    except Exception as exc:  # a library error is this stage's failure, in one line
+        raise MeshError(stage, one_line(exc)) from None
+    if check:
+        require_closed_manifold(result, stage, zero_area_ok=zero_area_ok)
+    timings[stage] = round(time.perf_counter() - t, 4)
+    return result
+
+
+def prepare_geometry(mesh: Mesh, config: PrepareConfig, timings: dict | None = None) -> Mesh:
+    """The geometry stages on a loaded mesh: watertight, remesh, simplify, normalize."""
+    timings = {} if timings is None else timings
+    mesh = run_stage(timings, "watertight", watertight, mesh, zero_area_ok=True)  # remesh rebuilds triangles
+    mesh = run_stage(timings, "remesh", lambda m: remesh(m, config.target_vertices, collapse=config.collapse), mesh)
+    mesh = run_stage(timings, "simplify", simplify, mesh, config.collapse)
+    return run_stage(timings, "normalize", normalize, mesh)
+
+
 def prepare_mesh(data: bytes, suffix: str, config: PrepareConfig, rng: np.random.Generator,
                  timings: dict | None = None) -> tuple[Mesh, np.ndarray, np.ndarray, np.ndarray]:
     """All stages on one file's bytes: the normalized mesh, its geodesic pairs, distances, skipped sources."""
     timings = {} if timings is None else timings
-
-    def run(stage, fn, *args, check=True, zero_area_ok=False):
-        current_stage(stage)
-        t = time.perf_counter()
-        try:
-            result = fn(*args)
-        except MeshError:
-            raise
-        except Exception as exc:  # a library error is this stage's failure, in one line
-            raise MeshError(stage, one_line(exc)) from None
-        if check:  # invariants after every stage: native code downstream segfaults on broken meshes
-            require_closed_manifold(result, stage, zero_area_ok=zero_area_ok)
-        timings[stage] = round(time.perf_counter() - t, 4)
-        return result
-
-    mesh = run("load", load_mesh_bytes, data, suffix, check=False)
-    mesh = run("watertight", watertight, mesh, zero_area_ok=True)  # remesh rebuilds the triangles
-    mesh = run("remesh", lambda m: remesh(m, config.target_vertices, collapse=config.collapse), mesh)
-    mesh = run("simplify", simplify, mesh, config.collapse)
-    mesh = run("normalize", normalize, mesh)
-    pairs, distances, skipped = run("geodesic", exact_geodesic_pairs, mesh, config.pairs, rng,
-                                    config.geodesic_backend, check=False)
+    mesh = run_stage(timings, "load", load_mesh_bytes, data, suffix, check=False)
+    mesh = prepare_geometry(mesh, config, timings)
+    pairs, distances, skipped = run_stage(timings, "geodesic", exact_geodesic_pairs, mesh, config.pairs, rng,
+                                          config.geodesic_backend, check=False)
     return mesh, pairs, distances, skipped
 
 
@@ -161,10 +178,11 @@ def process_task(task: MeshTask, out: str, config: PrepareConfig) -> dict:
             "seconds": time.perf_counter() - start}
 
 
-def select_tasks(raw_dir: str | Path, out: str, shard: tuple[int, int], retry_failed: bool
+def select_tasks(raw_dir: str | Path, out: str, shard: tuple[int, int], retry_failed: bool,
+                 include: set[str] | None = None, exclude: set[str] | None = None
                  ) -> tuple[list[MeshTask], int, int]:
     """This shard's tasks that still need work, and how many were already committed or failed."""
-    tasks = make_tasks(raw_dir, [s for s in discover(raw_dir) if in_shard(s, shard)])
+    tasks = make_tasks(raw_dir, [s for s in discover(raw_dir, include, exclude) if in_shard(s, shard)])
     failed = set() if retry_failed else set(store.list_failures(out))
     done = {t.mesh_id for t in tasks if store.mesh_status(out, t.mesh_id) == "ok"}
     pending = [t for t in tasks if t.mesh_id not in done and t.mesh_id not in failed]

@@ -8,12 +8,20 @@ import trimesh
 
 from geodata.mesh import Mesh, MeshError, one_line
 
-__all__ = ["MESH_SUFFIXES", "load_mesh_bytes", "clean"]
+__all__ = ["MESH_SUFFIXES", "load_mesh_bytes", "load_mesh_file", "clean"]
 
 MESH_SUFFIXES = (".obj", ".off", ".ply", ".stl", ".glb")
 
 
-def load_mesh_bytes(data: bytes, suffix: str) -> Mesh:
+def load_mesh_file(path) -> tuple[Mesh, np.ndarray]:
+    """Load, validate and clean a mesh file; also return, for every vertex of the file, its index in
+    the cleaned mesh (-1 for vertices no face uses), so results can be reported on the file's vertices."""
+    from pathlib import Path
+
+    return load_mesh_bytes(Path(path).read_bytes(), Path(path).suffix, return_map=True)
+
+
+def load_mesh_bytes(data: bytes, suffix: str, return_map: bool = False):
     """Parse a mesh file's bytes (format from `suffix`), validate it and clean it.
 
     Raises MeshError("load", reason) for anything that is not a usable triangle mesh.
@@ -30,11 +38,13 @@ def load_mesh_bytes(data: bytes, suffix: str) -> Mesh:
         raise MeshError("load", "file holds no triangle mesh")
     vertices = np.asarray(loaded.vertices, dtype=np.float64).reshape(-1, 3)
     faces = np.asarray(loaded.faces).reshape(-1, 3)
-    return clean(vertices, faces)
+    return clean(vertices, faces, return_map)
 
 
-def clean(vertices: np.ndarray, faces: np.ndarray) -> Mesh:
-    """Validate raw arrays, then merge duplicate vertices and drop degenerate faces and unused vertices."""
+def clean(vertices: np.ndarray, faces: np.ndarray, return_map: bool = False):
+    """Validate raw arrays, then merge duplicate vertices and drop degenerate faces and unused vertices.
+
+    With `return_map`, also the index in the cleaned mesh of every input vertex (-1: dropped)."""
     if len(faces) == 0:
         raise MeshError("load", "no faces")
     if not np.isfinite(vertices).all():
@@ -58,5 +68,10 @@ def clean(vertices: np.ndarray, faces: np.ndarray) -> Mesh:
     if len(faces) == 0:
         raise MeshError("load", "all faces are degenerate (zero area)")
     used, compact = np.unique(faces, return_inverse=True)
-    return Mesh(unique[used], compact.reshape(-1, 3))
+    mesh = Mesh(unique[used], compact.reshape(-1, 3))
+    if not return_map:
+        return mesh
+    to_clean = np.full(len(unique), -1, dtype=np.int64)
+    to_clean[used] = np.arange(len(used))
+    return mesh, to_clean[inverse.reshape(-1)]
 

@@ -1,0 +1,110 @@
+"""A user's mesh file to predicted (and optionally exact) distances: the work behind ``gegnn query``.
+
+Indices are the file's own vertex indices. The network runs on the file's mesh after cleaning
+(coincident vertices merged, degenerate faces and unused vertices dropped), or with ``prepare`` on the
+output of the geodata pipeline (watertight, remeshed to ~5k vertices: the meshes the model was trained
+on); results are carried back to the file's vertices (through the merge, or to the nearest prepared
+vertex).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from geodata.mesh import Mesh, MeshError, edge_face_counts
+
+__all__ = ["QueryMesh", "load_query_mesh", "exact_field", "relative_errors", "read_pairs"]
+
+EPS = 1e-3  # the training metric's offset, in normalized units (longest half-extent 1)
+
+
+@dataclass
+class QueryMesh:
+    path: str
+    n_file_vertices: int
+    mesh: Mesh              # the mesh the network runs on, in the file's units
+    to_mesh: np.ndarray     # (n_file_vertices,) index into `mesh` (-1: vertex used by no face)
+    scale: float            # half the longest bounding-box extent: the unit of the metric's offset
+
+    def vertex(self, i: int) -> int:
+        """The network-mesh vertex standing for file vertex ``i``."""
+        if not 0 <= i < self.n_file_vertices:
+            raise ValueError(f"vertex {i} out of range: {Path(self.path).name} has {self.n_file_vertices} vertices")
+        if self.to_mesh[i] < 0:
+            raise ValueError(f"vertex {i} of {Path(self.path).name} is used by no face")
+        return int(self.to_mesh[i])
+
+    def to_file(self, values: np.ndarray) -> np.ndarray:
+        """Per-vertex values of `mesh` as values of the file's vertices (NaN where unused)."""
+        out = np.full(self.n_file_vertices, np.nan, dtype=np.float64)
+        used = self.to_mesh >= 0
+        out[used] = values[self.to_mesh[used]]
+        return out
+
+
+def load_query_mesh(path, prepare: bool = False, target_vertices: int = 5000) -> QueryMesh:
+    """Load and validate ``path`` (MeshError with the reason when it is not a usable mesh)."""
+    from geodata.stages.load import load_mesh_file
+    from geodata.stages.normalize import normalization
+
+    mesh, to_clean = load_mesh_file(path)
+    center, scale = normalization(mesh.vertices)
+    if not scale > 0:
+        raise MeshError("load", "mesh has zero extent")
+    if not prepare:
+        return QueryMesh(str(path), len(to_clean), mesh, to_clean, scale)
+
+    from scipy.spatial import cKDTree
+
+    from geodata.prepare import PrepareConfig, prepare_geometry
+
+    prepared = prepare_geometry(mesh, PrepareConfig(target_vertices=target_vertices))
+    p_center, p_scale = normalization(np.asarray(prepared.vertices, dtype=np.float64))
+    # Back to the file's units: the prepared mesh spans (almost exactly) the input's bounding box.
+    vertices = (prepared.vertices - p_center) * (scale / p_scale) + center
+    nearest = cKDTree(vertices).query(mesh.vertices)[1]
+    to_mesh = np.where(to_clean >= 0, nearest[np.maximum(to_clean, 0)], -1)
+    return QueryMesh(str(path), len(to_clean), Mesh(vertices, prepared.faces), to_mesh, scale)
+
+
+def exact_field(mesh: Mesh, source: int) -> np.ndarray:
+    """Exact geodesic distances from ``source`` (tvb-gdist), in a forked child: Kirsanov's code
+    segfaults on some inputs, which then fail with a MeshError instead of killing the caller."""
+    from geodata.geodesic import exact_geodesic_distances
+    from geodata.parallel import run_isolated
+
+    _, counts = edge_face_counts(mesh.faces)
+    if (counts > 2).any():
+        raise MeshError("exact", f"{int((counts > 2).sum())} non-manifold edges (exact geodesics need a "
+                                 "manifold mesh; --prepare makes one)")
+    d = run_isolated(exact_geodesic_distances, mesh, source)
+    return np.where(np.isfinite(d), d, np.nan)
+
+
+def relative_errors(pred: np.ndarray, exact: np.ndarray, scale: float, source: int) -> np.ndarray:
+    """|pred - exact| / (exact + 1e-3 in normalized units): the training metric, per vertex (NaN at the
+    source and where exact is undefined, e.g. another component)."""
+    err = np.abs(pred - exact) / (exact + EPS * scale)
+    err[source] = np.nan
+    return err
+
+
+def read_pairs(path) -> np.ndarray:
+    """Pairs (P, 2) int64 from a CSV file of two integer columns; a header line is allowed."""
+    rows = []
+    for n, line in enumerate(Path(path).read_text().splitlines()):
+        cells = [c.strip() for c in line.split(",")]
+        if not line.strip():
+            continue
+        if len(cells) < 2:
+            raise ValueError(f"{path}:{n + 1}: expected two columns 'i,j'")
+        try:
+            rows.append((int(cells[0]), int(cells[1])))
+        except ValueError:
+            if rows or n:  # only the first line may be a header
+                raise ValueError(f"{path}:{n + 1}: not two integers: {line.strip()!r}") from None
+    if not rows:
+        raise ValueError(f"{path}: no pairs")
+    return np.array(rows, dtype=np.int64)

@@ -1,0 +1,192 @@
+"""Offscreen pictures of scalar fields on meshes: a small NumPy z-buffer rasterizer plus matplotlib.
+
+The field is interpolated per pixel (barycentric), shaded by the face normal and cut by isolines, so
+pictures look the same on any machine without OpenGL. Used by ``gegnn query -o field.png`` and the
+results report.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["View", "default_view", "rasterize", "shade_field", "Panel", "save_panels"]
+
+
+@dataclass(frozen=True)
+class View:
+    """Orthographic camera: rows of ``rotation`` are screen right, screen up, towards the viewer."""
+
+    rotation: np.ndarray
+    center: np.ndarray
+
+
+def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
+    x, y, z = axis / np.linalg.norm(axis)
+    c, s = np.cos(angle), np.sin(angle)
+    k = np.array([[0, -z, y], [z, 0, -x], [-y, x, 0]])
+    return np.eye(3) + s * k + (1 - c) * k @ k
+
+
+def default_view(vertices: np.ndarray, towards: np.ndarray | None = None, tilt: float = 0.35) -> View:
+    """Look along the mesh's thinnest principal axis, tilted by ``tilt`` radians for depth.
+
+    The longest axis is vertical. With ``towards`` (a direction, e.g. the source's normal), the
+    camera sits on that side of the mesh.
+    """
+    center = (vertices.min(axis=0) + vertices.max(axis=0)) / 2
+    _, vecs = np.linalg.eigh(np.cov((vertices - center).T))
+    up, right, forward = vecs[:, 2], vecs[:, 1], vecs[:, 0]
+    if towards is not None and forward @ towards < 0:
+        forward, right = -forward, -right
+    rot = np.stack([right, up, forward])  # right-handed: right x up = forward
+    if np.linalg.det(rot) < 0:
+        rot[0] = -rot[0]
+    tilt_rot = _rotation(np.array([1.0, 0, 0]), tilt) @ _rotation(np.array([0, 1.0, 0]), -tilt)
+    return View(tilt_rot @ rot, center)
+
+
+def rasterize(vertices: np.ndarray, faces: np.ndarray, view: View, size: int = 512, margin: float = 0.05):
+    """Z-buffer rasterization. Returns (face index (H, W) with -1 for background, barycentric
+    coordinates (H, W, 3), projected vertex pixels (N, 2), vertex depths (N,))."""
+    p = (vertices - view.center) @ view.rotation.T
+    lo, hi = p[:, :2].min(axis=0), p[:, :2].max(axis=0)
+    scale = (1 - 2 * margin) * size / max((hi - lo).max(), 1e-12)
+    xy = (p[:, :2] - (lo + hi) / 2) * scale + size / 2
+    xy[:, 1] = size - xy[:, 1]  # image rows grow downwards
+    depth = p[:, 2]
+    tri = xy[faces]                                          # (F, 3, 2)
+    x0 = np.clip(np.floor(tri.min(axis=1)).astype(int), 0, size - 1)
+    x1 = np.clip(np.ceil(tri.max(axis=1)).astype(int), 0, size - 1)
+    extent = (x1 - x0).max(axis=1) + 1
+    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
+    area = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+    valid = np.abs(area) > 1e-12
+    pix, zs, fid, bar = [], [], [], []
+    # Triangles grouped by pixel extent, so every group is one vectorized pass over a small square.
+    for k in range(int(np.ceil(np.log2(max(extent.max(), 1)))) + 1):
+        side = 2 ** k
+        group = np.flatnonzero(valid & (extent <= side) & (extent > side // 2 if k else True))
+        if not len(group):
+            continue
+        oy, ox = np.mgrid[0:side, 0:side]
+        offsets = np.stack([ox.ravel(), oy.ravel()], axis=1)
+        for chunk in np.array_split(group, max(1, len(group) * side * side // 2_000_000)):
+            px = x0[chunk, None, :] + offsets[None]           # (T, K, 2) integer pixels
+            q = px + 0.5
+            ta, tb, tc = (t[chunk, None, :] for t in (a, b, c))
+            w0 = (tb[..., 0] - q[..., 0]) * (tc[..., 1] - q[..., 1]) - (tb[..., 1] - q[..., 1]) * (tc[..., 0] - q[..., 0])
+            w1 = (tc[..., 0] - q[..., 0]) * (ta[..., 1] - q[..., 1]) - (tc[..., 1] - q[..., 1]) * (ta[..., 0] - q[..., 0])
+            ar = area[chunk, None]
+            l0, l1 = w0 / ar, w1 / ar
+            l2 = 1 - l0 - l1
+            inside = (l0 >= -1e-9) & (l1 >= -1e-9) & (l2 >= -1e-9) & (px < size).all(axis=2)
+            t_idx, k_idx = np.nonzero(inside)
+            f = chunk[t_idx]
+            lam = np.stack([l0[t_idx, k_idx], l1[t_idx, k_idx], l2[t_idx, k_idx]], axis=1)
+            pix.append(px[t_idx, k_idx, 1] * size + px[t_idx, k_idx, 0])
+            zs.append((depth[faces[f]] * lam).sum(axis=1))
+            fid.append(f)
+            bar.append(lam)
+    face_img = np.full(size * size, -1, dtype=np.int64)
+    bary_img = np.zeros((size * size, 3))
+    if pix:
+        pix, zs, fid, bar = (np.concatenate(x) for x in (pix, zs, fid, bar))
+        order = np.lexsort((-zs, pix))                       # per pixel, nearest first
+        first = order[np.r_[True, pix[order][1:] != pix[order][:-1]]]
+        face_img[pix[first]] = fid[first]
+        bary_img[pix[first]] = bar[first]
+    return face_img.reshape(size, size), bary_img.reshape(size, size, 3), xy, depth
+
+
+def shade_field(vertices, faces, field, view: View, *, size=512, cmap="viridis", vmin=None, vmax=None,
+                isolines: int = 12, marker: int | None = None) -> np.ndarray:
+    """RGBA image (H, W, 4) of ``field`` (per vertex) with Lambert shading and ``isolines`` levels
+    between vmin and vmax; ``marker`` draws a red dot on that vertex when it is visible."""
+    import matplotlib
+
+    vmin = float(np.min(field)) if vmin is None else vmin
+    vmax = float(np.max(field)) if vmax is None else vmax
+    face_img, bary, xy, depth = rasterize(vertices, faces, view, size)
+    covered = face_img >= 0
+    f = np.where(covered, face_img, 0)
+    value = (field[faces[f]] * bary).sum(axis=2)
+    t = np.clip((value - vmin) / max(vmax - vmin, 1e-12), 0, 1)
+    rgba = matplotlib.colormaps[cmap](t)
+    n = np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]], vertices[faces[:, 2]] - vertices[faces[:, 0]])
+    n_view = (n @ view.rotation.T)[:, 2] / np.maximum(np.linalg.norm(n, axis=1), 1e-30)
+    light = 0.45 + 0.55 * np.abs(n_view)[f]
+    rgba[..., :3] *= light[..., None]
+    if isolines:
+        band = np.floor(t * isolines - 1e-9)
+        edge = np.zeros_like(covered)
+        for shift in ((0, 1), (1, 0)):
+            other = np.roll(band, shift, axis=(0, 1))
+            both = covered & np.roll(covered, shift, axis=(0, 1))
+            edge |= both & (other != band)
+        rgba[edge, :3] *= 0.25
+    rgba[~covered] = (1, 1, 1, 0)
+    if marker is not None:
+        x, y = xy[marker]
+        r = max(2, size // 120)
+        yy, xx = np.mgrid[0:size, 0:size]
+        dot = (xx - x) ** 2 + (yy - y) ** 2 <= r * r
+        # Visible when the marker's depth is not far behind the surface drawn at its pixel.
+        px, py = int(np.clip(x, 0, size - 1)), int(np.clip(y, 0, size - 1))
+        if face_img[py, px] >= 0:
+            shown = (depth[faces[face_img[py, px]]] * bary[py, px]).sum()
+            if depth[marker] >= shown - 0.02 * np.ptp(depth):
+                rgba[dot] = (0.85, 0.1, 0.1, 1)
+    return rgba
+
+
+@dataclass
+class Panel:
+    """One picture of a figure: a per-vertex field, its title, colormap, color bar label and range."""
+
+    field: np.ndarray
+    title: str
+    cmap: str = "viridis"
+    label: str = "distance"
+    vmin: float | None = None
+    vmax: float | None = None
+    isolines: int = 12
+
+
+def save_panels(path, vertices, faces, rows: list[list[Panel]], view: View | None = None, *,
+                source: int | None = None, suptitle: str | None = None, size: int = 480) -> None:
+    """A grid of rendered fields (rows of panels on their own meshes share ``vertices``/``faces``
+    when those are arrays; pass lists of arrays, one per row, for different meshes), each with a
+    color bar, saved as PNG."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    per_row = [(vertices, faces)] * len(rows) if isinstance(vertices, np.ndarray) else list(zip(vertices, faces))
+    sources = source if isinstance(source, list) else [source] * len(rows)
+    ncols = max(len(r) for r in rows)
+    fig, axes = plt.subplots(len(rows), ncols, figsize=(3.6 * ncols, 3.4 * len(rows)), squeeze=False)
+    for r, (panels, (v, f), src) in enumerate(zip(rows, per_row, sources)):
+        towards = None
+        if src is not None:
+            from geodata.mesh import Mesh, vertex_normals
+            towards = vertex_normals(Mesh(v, f))[src]
+        cam = view or default_view(v, towards)
+        for c in range(ncols):
+            ax = axes[r, c]
+            ax.set_axis_off()
+            if c >= len(panels):
+                continue
+            p = panels[c]
+            vmin = float(np.min(p.field)) if p.vmin is None else p.vmin
+            vmax = float(np.max(p.field)) if p.vmax is None else p.vmax
+            ax.imshow(shade_field(v, f, p.field, cam, size=size, cmap=p.cmap, vmin=vmin, vmax=vmax,
+                                   isolines=p.isolines, marker=src))
+            ax.set_title(p.title, fontsize=10)
+            mappable = matplotlib.cm.ScalarMappable(matplotlib.colors.Normalize(vmin, vmax), p.cmap)
+            fig.colorbar(mappable, ax=ax, fraction=0.046, pad=0.02, label=p.label)
+    if suptitle:
+        fig.suptitle(suptitle)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)

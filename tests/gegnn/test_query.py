@@ -1,0 +1,112 @@
+"""gegnn query and export: file numbering, exact comparison, pairs CSV, pictures, clear errors."""
+import numpy as np
+import pytest
+import trimesh
+from click.testing import CliRunner
+from gegnn_stores import ellipsoid
+
+from gegnn import GeGnn, GeGnnConfig
+from gegnn.checkpoint import load_checkpoint
+from gegnn.cli import main
+from gegnn.query import load_query_mesh, read_pairs
+
+SMALL = GeGnnConfig(channels=16, embed_dim=16, decoder_hidden=16, encoder_blocks=(1,) * 5,
+                    decoder_blocks=(1,) * 5)
+
+
+@pytest.fixture(scope="module")
+def ckpt(tmp_path_factory):
+    torch_model = GeGnn(SMALL)
+    path = tmp_path_factory.mktemp("ckpt") / "model.safetensors"
+    torch_model.save(path)
+    return str(path)
+
+
+@pytest.fixture(scope="module")
+def soup(tmp_path_factory):
+    """An ellipsoid written as a soup (every face has its own three vertices) in centimetres."""
+    v, f = ellipsoid((1.0, 0.7, 0.5), subdivisions=3)
+    path = tmp_path_factory.mktemp("mesh") / "soup.obj"
+    trimesh.Trimesh(v[f].reshape(-1, 3) * 100, np.arange(3 * len(f)).reshape(-1, 3), process=False).export(path)
+    return str(path), len(v), 3 * len(f)
+
+
+def test_soup_is_merged_and_reported_in_file_numbering(soup, ckpt, tmp_path):
+    path, n_merged, n_file = soup
+    qm = load_query_mesh(path)
+    assert len(qm.mesh.vertices) == n_merged and len(qm.to_mesh) == n_file
+    out = tmp_path / "f.npy"
+    result = CliRunner().invoke(main, ["query", ckpt, path, "--source", "4", "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    field = np.load(out)
+    assert field.shape == (n_file,) and field[4] == 0
+    # copies of one vertex in the soup carry the same value
+    same = np.flatnonzero(qm.to_mesh == qm.to_mesh[7])
+    assert len(same) > 1 and np.all(field[same] == field[same[0]])
+
+
+def test_exact_png_and_prepare(soup, ckpt, tmp_path):
+    path, _, _ = soup
+    out = tmp_path / "cmp.png"
+    result = CliRunner().invoke(main, ["query", ckpt, path, "--source", "0", "--exact", "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "mean relative error vs exact" in result.output
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    import matplotlib.image
+    img = matplotlib.image.imread(out)
+    assert img.shape[1] > 2.5 * img.shape[0]  # three panels side by side
+    result = CliRunner().invoke(main, ["query", ckpt, path, "--source", "0", "--prepare", "-o",
+                                       str(tmp_path / "p.ply")])
+    assert result.exit_code == 0, result.output
+    m = trimesh.load(tmp_path / "p.ply", process=False)
+    assert 4000 < len(m.vertices) < 6000  # the pipeline's ~5k-vertex remesh
+    assert np.ptp(m.vertices, axis=0).max() == pytest.approx(200, rel=0.02)  # still in the file's units
+
+
+def test_pairs_csv_matches_the_field(soup, ckpt, tmp_path):
+    path, _, _ = soup
+    pairs = tmp_path / "pairs.csv"
+    pairs.write_text("i,j\n0,5\n0,9\n3,3\n")
+    out = tmp_path / "d.csv"
+    result = CliRunner().invoke(main, ["query", ckpt, path, "--pairs", str(pairs), "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    rows = out.read_text().splitlines()
+    assert rows[0] == "i,j,distance" and len(rows) == 4
+    d = np.array([float(r.split(",")[2]) for r in rows[1:]])
+    CliRunner().invoke(main, ["query", ckpt, path, "--source", "0", "-o", str(tmp_path / "f.npy")])
+    field = np.load(tmp_path / "f.npy")
+    np.testing.assert_allclose(d[:2], field[[5, 9]], rtol=1e-5)
+    assert d[2] == 0
+
+
+def test_clear_errors(soup, ckpt, tmp_path):
+    path, _, n_file = soup
+    runner = CliRunner()
+    r = runner.invoke(main, ["query", ckpt, path, "--source", str(n_file)])
+    assert r.exit_code != 0 and f"soup.obj has {n_file} vertices" in r.output
+    bad = tmp_path / "bad.obj"
+    bad.write_text("v 0 0 0\nv 1 0 0\nf 1 2 3\n")
+    r = runner.invoke(main, ["query", ckpt, str(bad), "--source", "0"])
+    assert r.exit_code != 0 and "bad.obj: load: unreadable as OBJ" in r.output
+    r = runner.invoke(main, ["query", ckpt, path])
+    assert r.exit_code != 0 and "--source or --pairs" in r.output
+    r = runner.invoke(main, ["query", path, "--source", "0"])
+    assert r.exit_code != 0 and "--pretrained MESH" in r.output
+    with pytest.raises(ValueError, match="not two integers"):
+        (tmp_path / "p.csv").write_text("0,1\nx,y\n")
+        read_pairs(tmp_path / "p.csv")
+
+
+def test_export_fp16_roundtrip(ckpt, tmp_path):
+    out = tmp_path / "w.safetensors"
+    result = CliRunner().invoke(main, ["export", ckpt, str(out)])
+    assert result.exit_code == 0, result.output
+    from safetensors import safe_open
+    with safe_open(str(out), framework="pt") as f:
+        assert {f.get_tensor(k).dtype for k in f.keys()} <= {__import__("torch").float16,
+                                                              __import__("torch").int64}
+    a, b = GeGnn.from_checkpoint(ckpt), GeGnn.from_checkpoint(out)
+    v, f = ellipsoid()
+    ea, eb = a.embed(v, f).field(0), b.embed(v, f).field(0)
+    np.testing.assert_allclose(eb, ea, rtol=0.02, atol=1e-3)  # fp16 weights: close, not equal
+    assert load_checkpoint(out).metadata["dtype"] == "fp16"
