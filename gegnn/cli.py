@@ -159,7 +159,7 @@ def query(files, pretrained, source, pairs_csv, output, exact, prepare, device, 
     try:
         qm = load_query_mesh(mesh_path, prepare=prepare)
         pairs = read_pairs(pairs_csv) if pairs_csv else np.array([[source, 0]])
-        net_pairs = np.vectorize(qm.vertex, otypes=[np.int64])(pairs) if len(pairs) else pairs
+        net_pairs = qm.vertices(pairs)
     except (MeshError, ValueError) as exc:
         raise click.ClickException(f"{mesh_path}: {exc}") from None
     src = int(net_pairs[0, 0])

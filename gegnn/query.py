@@ -28,13 +28,17 @@ class QueryMesh:
     to_mesh: np.ndarray     # (n_file_vertices,) index into `mesh` (-1: vertex used by no face)
     scale: float            # half the longest bounding-box extent: the unit of the metric's offset
 
-    def vertex(self, i: int) -> int:
-        """The network-mesh vertex standing for file vertex ``i``."""
-        if not 0 <= i < self.n_file_vertices:
-            raise ValueError(f"vertex {i} out of range: {Path(self.path).name} has {self.n_file_vertices} vertices")
-        if self.to_mesh[i] < 0:
-            raise ValueError(f"vertex {i} of {Path(self.path).name} is used by no face")
-        return int(self.to_mesh[i])
+    def vertices(self, idx) -> np.ndarray:
+        """The network-mesh vertices standing for file vertices ``idx`` (an int or an index array)."""
+        idx = np.asarray(idx, dtype=np.int64)
+        bad = (idx < 0) | (idx >= self.n_file_vertices)
+        if bad.any():
+            raise ValueError(f"vertex {idx[bad].flat[0]} out of range: {Path(self.path).name} has "
+                             f"{self.n_file_vertices} vertices")
+        out = self.to_mesh[idx]
+        if (out < 0).any():
+            raise ValueError(f"vertex {idx[out < 0].flat[0]} of {Path(self.path).name} is used by no face")
+        return out
 
     def to_file(self, values: np.ndarray) -> np.ndarray:
         """Per-vertex values of `mesh` as values of the file's vertices (NaN where unused)."""
@@ -93,18 +97,12 @@ def relative_errors(pred: np.ndarray, exact: np.ndarray, scale: float, source: i
 
 def read_pairs(path) -> np.ndarray:
     """Pairs (P, 2) int64 from a CSV file of two integer columns; a header line is allowed."""
-    rows = []
-    for n, line in enumerate(Path(path).read_text().splitlines()):
-        cells = [c.strip() for c in line.split(",")]
-        if not line.strip():
-            continue
-        if len(cells) < 2:
-            raise ValueError(f"{path}:{n + 1}: expected two columns 'i,j'")
-        try:
-            rows.append((int(cells[0]), int(cells[1])))
-        except ValueError:
-            if rows or n:  # only the first line may be a header
-                raise ValueError(f"{path}:{n + 1}: not two integers: {line.strip()!r}") from None
-    if not rows:
+    lines = Path(path).read_text().splitlines()
+    header = bool(lines) and not lines[0].split(",")[0].strip().lstrip("-").isdigit()
+    try:
+        pairs = np.loadtxt(lines[header:], delimiter=",", dtype=np.int64, usecols=(0, 1), ndmin=2)
+    except ValueError as exc:
+        raise ValueError(f"{path}: expected two integer columns i,j ({exc})") from None
+    if not len(pairs):
         raise ValueError(f"{path}: no pairs")
-    return np.array(rows, dtype=np.int64)
+    return pairs

@@ -92,7 +92,7 @@ def test_clear_errors(soup, ckpt, tmp_path):
     assert r.exit_code != 0 and "--source or --pairs" in r.output
     r = runner.invoke(main, ["query", path, "--source", "0"])
     assert r.exit_code != 0 and "--pretrained MESH" in r.output
-    with pytest.raises(ValueError, match="not two integers"):
+    with pytest.raises(ValueError, match="two integer columns"):
         (tmp_path / "p.csv").write_text("0,1\nx,y\n")
         read_pairs(tmp_path / "p.csv")
 

@@ -1,0 +1,46 @@
+"""The model shipped in the package: small fp16 safetensors that loads alone and knows the sphere."""
+from importlib.resources import files
+
+import numpy as np
+import pytest
+import torch
+import trimesh
+from safetensors import safe_open
+
+from gegnn import GeGnn
+from gegnn.model import PRETRAINED
+
+WEIGHTS = files("gegnn") / "weights" / PRETRAINED
+
+
+def test_weights_are_fp16_safetensors_under_16_mib():
+    assert WEIGHTS.is_file() and WEIGHTS.stat().st_size <= 16 * 2**20
+    with safe_open(str(WEIGHTS), framework="pt") as f:
+        assert {f.get_tensor(k).dtype for k in f.keys() if f.get_tensor(k).is_floating_point()} == {torch.float16}
+
+
+@pytest.fixture(scope="module")
+def model():
+    return GeGnn.pretrained()
+
+
+def test_sphere_great_circles(model):
+    """On a unit sphere the geodesic distance is the angle between the two points."""
+    m = trimesh.creation.icosphere(4)  # 2,562 vertices, about the training meshes' edge length
+    v = np.asarray(m.vertices)
+    rng = np.random.default_rng(0)
+    i, j = rng.integers(0, len(v), 20000), rng.integers(0, len(v), 20000)
+    keep = i != j
+    i, j = i[keep], j[keep]
+    exact = np.arccos(np.clip((v[i] * v[j]).sum(axis=1), -1, 1))
+    pred = model.embed(v * 3.0, m.faces).distance(i, j) / 3.0  # any units: scale in, scale out
+    mre = np.mean(np.abs(pred - exact) / (exact + 1e-3))
+    assert mre < SPHERE_MRE_BOUND
+
+
+def test_distance_is_symmetric_with_zero_diagonal(model):
+    m = trimesh.creation.icosphere(3)
+    emb = model.embed(np.asarray(m.vertices), m.faces)
+    a = emb.distance(np.arange(10), np.arange(10, 20))
+    np.testing.assert_array_equal(a, emb.distance(np.arange(10, 20), np.arange(10)))
+    assert (emb.distance(np.arange(10), np.arange(10)) == 0).all()
