@@ -151,6 +151,8 @@ def query(files, pretrained, source, pairs_csv, output, exact, prepare, device, 
         raise click.UsageError("give CHECKPOINT MESH, or --pretrained MESH")
     if (source is None) == (pairs_csv is None):
         raise click.UsageError("give one of --source or --pairs")
+    if exact and pairs_csv:
+        raise click.UsageError("--exact goes with --source (it compares whole fields)")
     mesh_path = files[-1]
     suffix = Path(output).suffix.lower() if output else ""
     allowed = (".csv",) if pairs_csv else (".npy", ".ply", ".png")
