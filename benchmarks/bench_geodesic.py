@@ -15,7 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from geodata.geodesic import exact_geodesic_distances, sample_sources, vertex_components
+from geodata.geodesic import exact_geodesic_distances, sample_sources
+from geodata.mesh import vertex_components
 from geodata.prepare import PrepareConfig, prepare_mesh
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "meshes" / "train"

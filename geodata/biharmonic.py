@@ -33,10 +33,9 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
-from scipy.sparse.csgraph import connected_components
 
 from geodata.geodesic import sample_sources
-from geodata.mesh import Mesh, MeshError
+from geodata.mesh import Mesh, MeshError, vertex_components
 
 __all__ = ["biharmonic_distances", "biharmonic_pairs", "BiharmonicSolver"]
 
@@ -129,9 +128,8 @@ class BiharmonicSolver:
         L, m = _operators(mesh)
         n = mesh.n_vertices
         self.n = n
-        f = mesh.faces
-        adj = sp.coo_matrix((np.ones(3 * len(f)), (f.ravel(), f[:, [1, 2, 0]].ravel())), shape=(n, n))
-        self.n_components, self.labels = connected_components(adj, directed=False)
+        self.labels = vertex_components(mesh)
+        self.n_components = int(self.labels.max()) + 1
         order = np.argsort(self.labels, kind="stable")
         bounds = np.searchsorted(self.labels[order], np.arange(self.n_components + 1))
         self.local = np.empty(n, dtype=np.int64)    # global vertex -> index inside its component

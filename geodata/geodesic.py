@@ -7,13 +7,10 @@ code and segfault on non-manifold input, so every call first checks the closed-m
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
-from geodata.mesh import Mesh, MeshError, closed_manifold_problem, unique_edges
+from geodata.mesh import Mesh, MeshError, closed_manifold_problem, vertex_components
 
-__all__ = ["BACKENDS", "exact_geodesic_distances", "vertex_components", "sample_sources",
-           "exact_geodesic_pairs"]
+__all__ = ["BACKENDS", "exact_geodesic_distances", "sample_sources", "exact_geodesic_pairs"]
 
 BACKENDS = ("gdist", "libigl")
 
@@ -36,14 +33,6 @@ def exact_geodesic_distances(mesh: Mesh, source: int, backend: str = "gdist") ->
         return igl.exact_geodesic(V=mesh.vertices, F=mesh.faces, VS=np.array([source], dtype=np.int64),
                                   VT=np.arange(mesh.n_vertices, dtype=np.int64))
     raise ValueError(f"unknown geodesic backend {backend!r}; choose from {BACKENDS}")
-
-
-def vertex_components(mesh: Mesh) -> np.ndarray:
-    """Connected-component label of every vertex (components joined by edges)."""
-    e = unique_edges(mesh.faces)
-    n = mesh.n_vertices
-    graph = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
-    return connected_components(graph, directed=False)[1]
 
 
 def sample_sources(labels: np.ndarray, n_pairs: int, rng: np.random.Generator) -> np.ndarray:

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["Mesh", "MeshError", "one_line", "unique_edges", "edge_face_counts", "closed_manifold_problem",
-           "component_volumes", "degenerate_faces", "vertex_normals", "require_closed_manifold"]
+           "vertex_components", "component_volumes", "degenerate_faces", "vertex_normals", "require_closed_manifold"]
 
 
 class MeshError(Exception):
@@ -131,17 +131,22 @@ def _pinched_vertices(faces: np.ndarray, n: int) -> bool:
     return bool((comps_per_vertex > 1).any())
 
 
-def component_volumes(mesh: Mesh) -> np.ndarray:
-    """Signed volume of each edge-connected component of a closed mesh (outward: positive),
-    components ordered by their first face."""
+def vertex_components(mesh: Mesh) -> np.ndarray:
+    """Connected-component label of every vertex (vertices joined by face edges; labels 0, 1, ... in
+    order of each component's lowest vertex)."""
     import scipy.sparse as sp
     from scipy.sparse.csgraph import connected_components
 
+    f, n = mesh.faces, mesh.n_vertices
+    adjacency = sp.coo_matrix((np.ones(f.size), (f.ravel(), f[:, [1, 2, 0]].ravel())), shape=(n, n))
+    return connected_components(adjacency, directed=False)[1]
+
+
+def component_volumes(mesh: Mesh) -> np.ndarray:
+    """Signed volume of each edge-connected component of a closed mesh (outward: positive),
+    components ordered by their first face."""
     v, f = mesh.vertices, mesh.faces
-    n = len(v)
-    g = sp.coo_matrix((np.ones(2 * len(f)), (np.concatenate([f[:, 0], f[:, 1]]),
-                                             np.concatenate([f[:, 1], f[:, 2]]))), shape=(n, n))
-    _, labels = connected_components(g, directed=False)
+    labels = vertex_components(mesh)
     _, first, inv = np.unique(labels[f[:, 0]], return_index=True, return_inverse=True)
     a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
     vol = np.bincount(inv.ravel(), weights=np.einsum("ij,ij->i", a, np.cross(b, c)) / 6.0)
