@@ -225,12 +225,11 @@ def augment(raw_dir, out_dir, variants, seed, jobs, include, exclude):
     from joblib import Parallel, delayed
 
     from geodata.augment import AugmentConfig, augment_file
-    from geodata.prepare import discover
+    from geodata.prepare import discover, raw_root
 
     _setup_logging(None)
     cfg = AugmentConfig(variants=variants, seed=seed)
-    root = Path(raw_dir)
-    base = root.parent if root.is_file() else root
+    base = raw_root(raw_dir)
     sources = discover(raw_dir, include, exclude)
     rows = []
     calls = (delayed(augment_file)(str(base / s), s, out_dir, cfg) for s in sources)

@@ -23,7 +23,7 @@ from geodata.stages.normalize import normalize
 from geodata.stages.remesh import remesh, simplify
 from geodata.stages.watertight import watertight
 
-__all__ = ["PrepareConfig", "MeshTask", "discover", "read_list", "make_tasks", "mesh_rng", "run_stage",
+__all__ = ["PrepareConfig", "MeshTask", "raw_root", "discover", "read_list", "make_tasks", "mesh_rng", "run_stage",
            "prepare_geometry", "prepare_mesh", "process_task", "STAGES"]
 
 STAGES = ("load", "watertight", "remesh", "simplify", "normalize", "geodesic")
@@ -54,6 +54,12 @@ class MeshTask:
     sha256: str
 
 
+def raw_root(raw_dir: str | Path) -> Path:
+    """The folder that `discover`'s relative paths start from: RAW_DIR, or a single file's folder."""
+    root = Path(raw_dir)
+    return root.parent if root.is_file() else root
+
+
 def discover(raw_dir: str | Path, include: set[str] | None = None, exclude: set[str] | None = None) -> list[str]:
     """Mesh files under raw_dir, recursively, as sorted relative POSIX paths; only those in
     ``include`` (when given) and none in ``exclude``."""
@@ -74,8 +80,7 @@ def read_list(path: str | Path) -> set[str]:
 
 def make_tasks(raw_dir: str | Path, sources: list[str]) -> list[MeshTask]:
     """Tasks with ids `<safe stem>-<8 hex of the content hash>`; identical files collapse to one task."""
-    root = Path(raw_dir)
-    base = root.parent if root.is_file() else root
+    base = raw_root(raw_dir)
     tasks: dict[str, MeshTask] = {}
     for source in sources:
         path = base / source
