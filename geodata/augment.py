@@ -21,6 +21,7 @@ import trimesh
 
 from geodata.mesh import Mesh, MeshError, one_line
 from geodata.stages.load import load_mesh_bytes
+from geodata.stages.repair import compact
 
 __all__ = ["AugmentConfig", "bend", "twist", "cut", "variant", "augment_file"]
 
@@ -92,8 +93,7 @@ def variant(mesh: Mesh, rng: np.random.Generator, cfg: AugmentConfig = AugmentCo
         n = rng.integers(1, 4)
         centers = v[f[rng.choice(len(f), n, p=area / area.sum())]].mean(axis=1)
         f = cut(v, f, centers, rng.uniform(0.05, 0.15, n) * np.linalg.norm(np.ptp(v, axis=0)))
-    used, compact = np.unique(f, return_inverse=True)
-    return Mesh(v[used], compact.reshape(-1, 3))
+    return compact(v, f)
 
 
 def augment_file(path: str, source: str, out_dir: str, cfg: AugmentConfig) -> dict:
