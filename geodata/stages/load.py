@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import io
+from pathlib import Path
 
 import numpy as np
 import trimesh
@@ -16,8 +17,6 @@ MESH_SUFFIXES = (".obj", ".off", ".ply", ".stl", ".glb")
 def load_mesh_file(path) -> tuple[Mesh, np.ndarray]:
     """Load, validate and clean a mesh file; also return, for every vertex of the file, its index in
     the cleaned mesh (-1 for vertices no face uses), so results can be reported on the file's vertices."""
-    from pathlib import Path
-
     return load_mesh_bytes(Path(path).read_bytes(), Path(path).suffix, return_map=True)
 
 
