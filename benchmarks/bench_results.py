@@ -18,7 +18,6 @@ import argparse
 import os
 import platform
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -26,8 +25,10 @@ import torch
 
 from gegnn import Embedding, GeGnn
 from gegnn.data import GeodesicStore
-from gegnn.render import Panel, save_panels
-from geodata.mesh import Mesh, unique_edges
+from gegnn.render import Panel, Row, save_panels
+from geodata.mesh import unique_edges
+
+import bench_gegnn  # benchmarks/ is on sys.path when a script there runs
 
 EPS = 1e-3
 
@@ -67,7 +68,8 @@ def evaluate_mesh(model, store, mesh_id, rng):
     exact = exact.astype(np.float64)
     i, j = pairs[:, 0], pairs[:, 1]
     row = dict(mesh=mesh_id, vertices=len(v), pairs=len(pairs))
-    row["gegnn"] = mre(model.embed(v, faces).distance(i, j), exact)
+    emb = model.embed(v, faces)
+    row["gegnn"] = mre(emb.distance(i, j), exact)
     sources = np.unique(i)
     heat = heat_fields(v, faces, sources)
     row["heat"] = mre(np.concatenate([heat[s][j[i == s]] for s in sources]),
@@ -83,18 +85,15 @@ def evaluate_mesh(model, store, mesh_id, rng):
     heat_d = heat_fields(cv, cf, src)
     row["heat_damaged"] = mre(np.concatenate([heat_d[s][cj[ci == s]] for s in src]),
                               np.concatenate([exact[ok][ci == s] for s in src]))
-    row["_mesh"] = (v, faces, dv, df, int(i[0]), exact[i == i[0]], j[i == i[0]])
+    s = int(i[0])  # the first stored source, for the picture grid: its exact field over all vertices
+    exact_field = np.zeros(len(v))
+    exact_field[j[i == s]] = exact[i == s]
+    row["_picture"] = (v, faces, s, emb.field(s), exact_field)
     return row
 
 
-def timed(fn, repeat=3):
-    fn()
-    best = float("inf")
-    for _ in range(repeat):
-        t = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t)
-    return best
+def timed(fn, repeat=3) -> float:
+    return bench_gegnn.timed(fn, repeat)[0]
 
 
 def timings(model, v, f, queries=1_000_000) -> list[tuple[str, float]]:
@@ -152,26 +151,21 @@ def main():
     out = Path(args.out)
     (out / "img").mkdir(parents=True, exist_ok=True)
     grid_ids = [m for m in args.grid.split(",") if m in mesh_ids]
-    grid_rows, verts, faces, srcs = [], [], [], []
+    grid_rows = []
     for mesh_id in grid_ids:
-        v, f, dv, df, s, ex, tj = next(r for r in rows if r["mesh"] == mesh_id)["_mesh"]
-        exact = np.zeros(len(v))
-        exact[tj] = ex
-        pred = model.embed(v, f).field(s)
+        v, f, s, pred, exact = next(r for r in rows if r["mesh"] == mesh_id)["_picture"]
         err = np.abs(pred - exact) / (exact + EPS)
         err[s] = 0
         top = float(exact.max())
-        grid_rows.append([Panel(pred, f"{mesh_id}: GeGnn", vmin=0, vmax=top),
-                          Panel(exact, "exact", vmin=0, vmax=top),
-                          Panel(err, f"relative error (mean {100 * err.mean():.1f}%)", "magma", "relative error",
-                                0, 0.1, isolines=0)])
-        verts.append(v)
-        faces.append(f)
-        srcs.append(s)
+        grid_rows.append(Row(v, f, s, [
+            Panel(pred, f"{mesh_id}: GeGnn", vmin=0, vmax=top),
+            Panel(exact, "exact", vmin=0, vmax=top),
+            Panel(err, f"relative error (mean {100 * err.mean():.1f}%)", "magma", "relative error", 0, 0.1,
+                  isolines=0)]))
     if grid_rows:
-        save_panels(out / "img" / "results-grid.png", verts, faces, grid_rows, source=srcs, size=360)
+        save_panels(out / "img" / "results-grid.png", grid_rows, size=360)
     largest = max(rows, key=lambda r: r["vertices"])
-    lv, lf = largest["_mesh"][:2]
+    lv, lf = largest["_picture"][:2]
     times = timings(model, lv, lf)
     for name, t in times:
         print(f"{name}: {t:.4g} s")

@@ -208,7 +208,7 @@ def query(files, pretrained, source, pairs_csv, output, exact, prepare, device, 
         colors = (matplotlib.colormaps["viridis"](field / max(field.max(), 1e-30)) * 255).astype(np.uint8)
         trimesh.Trimesh(qm.mesh.vertices, qm.mesh.faces, vertex_colors=colors, process=False).export(output)
     elif suffix == ".png":
-        from .render import Panel, save_panels
+        from .render import Panel, Row, save_panels
 
         top = float(np.nanmax(exact_d)) if exact_d is not None else float(field.max())
         panels = [Panel(field, "predicted", vmin=0, vmax=top)]
@@ -216,7 +216,7 @@ def query(files, pretrained, source, pairs_csv, output, exact, prepare, device, 
             panels += [Panel(np.nan_to_num(exact_d, nan=top), "exact", vmin=0, vmax=top),
                        Panel(np.nan_to_num(err, nan=0.0), "relative error", "magma", "|pred - exact| / exact",
                              0, 0.1, isolines=0)]
-        save_panels(output, qm.mesh.vertices, qm.mesh.faces, [panels], source=src, suptitle=title)
+        save_panels(output, [Row(qm.mesh.vertices, qm.mesh.faces, src, panels)], suptitle=title)
     if output:
         click.echo(f"written {output}")
 

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["View", "default_view", "rasterize", "shade_field", "Panel", "save_panels"]
+__all__ = ["View", "default_view", "rasterize", "shade_field", "Panel", "Row", "save_panels"]
 
 
 @dataclass(frozen=True)
@@ -153,31 +153,36 @@ class Panel:
     isolines: int = 12
 
 
-def save_panels(path, vertices, faces, rows: list[list[Panel]], view: View | None = None, *,
-                source: int | None = None, suptitle: str | None = None, size: int = 480) -> None:
-    """A grid of rendered fields (rows of panels on their own meshes share ``vertices``/``faces``
-    when those are arrays; pass lists of arrays, one per row, for different meshes), each with a
-    color bar, saved as PNG."""
+@dataclass
+class Row:
+    """One mesh's row of a figure: its panels, and the source vertex to mark (None: no marker)."""
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    source: int | None
+    panels: list[Panel]
+
+
+def save_panels(path, rows: list[Row], *, suptitle: str | None = None, size: int = 480) -> None:
+    """A grid of rendered fields, one row per mesh, each panel with a color bar, saved as PNG. A row's
+    camera is `default_view`, on the side of the source when there is one."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    per_row = [(vertices, faces)] * len(rows) if isinstance(vertices, np.ndarray) else list(zip(vertices, faces))
-    sources = source if isinstance(source, list) else [source] * len(rows)
-    ncols = max(len(r) for r in rows)
+    from geodata.mesh import Mesh, vertex_normals
+
+    ncols = max(len(row.panels) for row in rows)
     fig, axes = plt.subplots(len(rows), ncols, figsize=(3.6 * ncols, 3.4 * len(rows)), squeeze=False)
-    for r, (panels, (v, f), src) in enumerate(zip(rows, per_row, sources)):
-        towards = None
-        if src is not None:
-            from geodata.mesh import Mesh, vertex_normals
-            towards = vertex_normals(Mesh(v, f))[src]
-        cam = view or default_view(v, towards)
+    for r, row in enumerate(rows):
+        v, f, src = row.vertices, row.faces, row.source
+        cam = default_view(v, None if src is None else vertex_normals(Mesh(v, f))[src])
         for c in range(ncols):
             ax = axes[r, c]
             ax.set_axis_off()
-            if c >= len(panels):
+            if c >= len(row.panels):
                 continue
-            p = panels[c]
+            p = row.panels[c]
             vmin = float(np.min(p.field)) if p.vmin is None else p.vmin
             vmax = float(np.max(p.field)) if p.vmax is None else p.vmax
             ax.imshow(shade_field(v, f, p.field, cam, size=size, cmap=p.cmap, vmin=vmin, vmax=vmax,
