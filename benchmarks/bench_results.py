@@ -26,15 +26,14 @@ import torch
 from gegnn import Embedding, GeGnn
 from gegnn.data import GeodesicStore
 from gegnn.render import Panel, Row, save_panels
+from gegnn.train import METRIC_EPS
 from geodata.mesh import unique_edges
 
 import bench_gegnn  # benchmarks/ is on sys.path when a script there runs
 
-EPS = 1e-3
-
 
 def mre(pred, exact) -> float:
-    return float(np.mean(np.abs(pred - exact) / (exact + EPS)))
+    return float(np.mean(np.abs(pred - exact) / (exact + METRIC_EPS)))
 
 
 def heat_fields(v, f, sources):
@@ -154,7 +153,7 @@ def main():
     grid_rows = []
     for mesh_id in grid_ids:
         v, f, s, pred, exact = next(r for r in rows if r["mesh"] == mesh_id)["_picture"]
-        err = np.abs(pred - exact) / (exact + EPS)
+        err = np.abs(pred - exact) / (exact + METRIC_EPS)
         err[s] = 0
         top = float(exact.max())
         grid_rows.append(Row(v, f, s, [

@@ -15,9 +15,10 @@ import numpy as np
 
 from geodata.mesh import Mesh, MeshError, edge_face_counts
 
+from .train import METRIC_EPS
+
 __all__ = ["QueryMesh", "load_query_mesh", "exact_field", "relative_errors", "read_pairs"]
 
-EPS = 1e-3  # the training metric's offset, in normalized units (longest half-extent 1)
 
 
 @dataclass
@@ -90,7 +91,7 @@ def exact_field(mesh: Mesh, source: int) -> np.ndarray:
 def relative_errors(pred: np.ndarray, exact: np.ndarray, scale: float, source: int) -> np.ndarray:
     """|pred - exact| / (exact + 1e-3 in normalized units): the training metric, per vertex (NaN at the
     source and where exact is undefined, e.g. another component)."""
-    err = np.abs(pred - exact) / (exact + EPS * scale)
+    err = np.abs(pred - exact) / (exact + METRIC_EPS * scale)
     err[source] = np.nan
     return err
 

@@ -25,6 +25,7 @@ from .model import GeGnn, GeGnnConfig
 __all__ = ["TrainConfig", "train", "relative_error", "evaluate_store", "lr_at"]
 
 METRICS = ["epoch", "step", "lr", "train_mre", "val_mre", "seconds"]
+METRIC_EPS = 1e-3  # offset of the relative error's denominator, in normalized units
 RESUME_KEEPS = ("epochs", "device", "workers")  # options a resumed run takes from the command line
 
 
@@ -52,7 +53,7 @@ class TrainConfig:
 
 def relative_error(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
     """Per pair |d_pred - d| / (d + 1e-3): the paper's loss and metric (mean it for the MRE)."""
-    return (pred.float() - target).abs() / (target + 1e-3)
+    return (pred.float() - target).abs() / (target + METRIC_EPS)
 
 
 def lr_at(step: int, total: int, base: float, warmup: int) -> float:
