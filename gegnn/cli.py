@@ -63,9 +63,20 @@ def _blocks(ctx, param, value):
 @click.option("--no-relative-position", is_flag=True, help="Ablation: drop v_i - v_j from GeoConv.")
 @click.option("--plain-grid-pool", is_flag=True, help="Ablation: pool on xyz only (sigma_n = inf).")
 @click.option("--euclidean-decoder", is_flag=True, help="Ablation: distance = ||e_i - e_j||.")
+@click.option("--landmarks", default=0, show_default=True,
+              help="Landmark-guided model: K farthest-point landmark distance fields per mesh (heat method) "
+                   "bound the decoder (0: the paper's model). With --init from a paper model, its network "
+                   "is kept and the landmark decoder starts fresh.")
+@click.option("--landmark-top", default=4, show_default=True,
+              help="Sorted landmark differences and sums the decoder reads (1: the bounds alone).")
+@click.option("--landmark-no-embedding", is_flag=True, help="Ablation: the decoder reads landmarks only.")
+@click.option("--landmark-no-euclidean", is_flag=True, help="Ablation: drop the straight-line distance input.")
+@click.option("--landmark-output", type=click.Choice(["ratio", "interval"]), default="ratio", show_default=True,
+              help="d = L exp(MLP), or (ablation) d = L + (U - L) sigmoid(MLP); L, U: the landmark bounds.")
 def train(store, run_dir, epochs, batch_size, lr, weight_decay, warmup_epochs, clip_grad, distance,
           pairs_per_mesh, val_fraction, val_store, no_rotate, seed, device, workers, resume, init_ckpt, channels,
-          blocks, aggr, no_edge_length, no_relative_position, plain_grid_pool, euclidean_decoder):
+          blocks, aggr, no_edge_length, no_relative_position, plain_grid_pool, euclidean_decoder, landmarks,
+          landmark_top, landmark_no_embedding, landmark_no_euclidean, landmark_output):
     """Train GeGnn on the geodata store STORE."""
     from .train import TrainConfig, train as run_training
 
@@ -78,7 +89,11 @@ def train(store, run_dir, epochs, batch_size, lr, weight_decay, warmup_epochs, c
     model_cfg = GeGnnConfig(channels=channels, embed_dim=channels, decoder_hidden=channels, aggr=aggr,
                             edge_length=not no_edge_length, relative_position=not no_relative_position,
                             sigma_n=math.inf if plain_grid_pool else GeGnnConfig.sigma_n,
-                            decoder="euclidean" if euclidean_decoder else "mlp", **extra)
+                            decoder="euclidean" if euclidean_decoder else "mlp", landmarks=landmarks,
+                            landmark_top=min(landmark_top, landmarks) if landmarks else landmark_top,
+                            landmark_embedding=not landmark_no_embedding,
+                            landmark_euclidean=not landmark_no_euclidean, landmark_output=landmark_output,
+                            **extra)
     run_training(cfg, model_cfg)
 
 
@@ -112,9 +127,11 @@ def evaluate(checkpoint, store, distance, device, csv_path):
 
 
 @main.command(context_settings={"max_content_width": 100})
-@click.argument("files", nargs=-1, required=True, type=click.Path(exists=True, dir_okay=False),
-                metavar="[CHECKPOINT] MESH")
-@click.option("--pretrained", is_flag=True, help="Use the model shipped in the package (no CHECKPOINT).")
+@click.argument("files", nargs=-1, required=True, type=click.Path(dir_okay=False),
+                metavar="[CHECKPOINT|NAME] MESH")
+@click.option("--pretrained", is_flag=True,
+              help="Use a model shipped in the package instead of CHECKPOINT: the most accurate one, or "
+                   "NAME ('landmark', 'paper').")
 @click.option("--source", type=int, help="Source vertex index (the file's own numbering).")
 @click.option("--pairs", "pairs_csv", type=click.Path(exists=True, dir_okay=False),
               help="Answer the pairs of this CSV (two integer columns i,j; a header is allowed).")
@@ -135,6 +152,7 @@ def query(files, pretrained, source, pairs_csv, output, exact, prepare, device, 
     Examples:
       gegnn query --pretrained bunny.obj --source 0 -o field.png
       gegnn query --pretrained bunny.obj --source 0 --exact -o compare.png
+      gegnn query --pretrained paper bunny.obj --source 0 --exact -o compare.png
       gegnn query runs/a/best.safetensors bunny.obj --pairs pairs.csv -o distances.csv
 
     Distances are in the mesh's units. The PLY and PNG show the mesh the network ran on (with
@@ -144,11 +162,16 @@ def query(files, pretrained, source, pairs_csv, output, exact, prepare, device, 
 
     from geodata.mesh import MeshError
 
-    from .model import GeGnn
+    from .model import PRETRAINED, GeGnn
     from .query import load_query_mesh, read_pairs
 
-    if pretrained == (len(files) == 2) or len(files) > 2:
-        raise click.UsageError("give CHECKPOINT MESH, or --pretrained MESH")
+    if len(files) > 2 or (not pretrained and len(files) != 2):
+        raise click.UsageError("give CHECKPOINT MESH, or --pretrained [NAME] MESH")
+    if pretrained and len(files) == 2 and files[0] not in PRETRAINED:
+        raise click.UsageError(f"no pretrained model {files[0]!r}; shipped: {', '.join(PRETRAINED)}")
+    for path in (files[-1:] if pretrained else files):
+        if not Path(path).is_file():
+            raise click.BadParameter(f"{path}: no such file", param_hint="[CHECKPOINT] MESH")
     if (source is None) == (pairs_csv is None):
         raise click.UsageError("give one of --source or --pairs")
     if exact and pairs_csv:
@@ -175,7 +198,8 @@ def query(files, pretrained, source, pairs_csv, output, exact, prepare, device, 
 
     from .train import pick_device
 
-    model = GeGnn.pretrained() if pretrained else GeGnn.from_checkpoint(files[0])
+    model = GeGnn.pretrained(files[0] if len(files) == 2 else None) if pretrained \
+        else GeGnn.from_checkpoint(files[0])
     emb = model.to(pick_device(device)).embed(qm.mesh.vertices, qm.mesh.faces, precision=precision)
     if pairs_csv:
         d = emb.distance(net_pairs[:, 0], net_pairs[:, 1])

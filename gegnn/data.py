@@ -13,6 +13,7 @@ import torch
 from torch import Tensor
 
 from .graph import Graph, directed_edges, disjoint_union, random_rotation
+from .landmarks import landmark_fields
 from .nn.geopool import Hierarchy, build_hierarchy
 
 __all__ = ["GeodesicStore", "MeshGeometry", "Batch", "split_meshes", "epoch_batches", "sample_mesh",
@@ -20,6 +21,7 @@ __all__ = ["GeodesicStore", "MeshGeometry", "Batch", "split_meshes", "epoch_batc
 
 DISTANCES = ("geodesic", "biharmonic")
 VAL_EPOCH = -1  # rng stream of the fixed validation sample
+LANDMARK_DRAWS = 4  # landmark choices per training mesh (augmentation; each is computed once and kept)
 
 
 @dataclass
@@ -27,6 +29,7 @@ class MeshGeometry:
     vertices: np.ndarray  # float32 (N, 3), normalized
     normals: np.ndarray   # float32 (N, 3)
     edges: np.ndarray     # int64 (E, 2), undirected
+    faces: np.ndarray     # int64 (F, 3)
 
 
 class GeodesicStore:
@@ -57,7 +60,8 @@ class GeodesicStore:
         g = self.root[f"meshes/{mesh_id}"]
         return MeshGeometry(np.asarray(g["vertices"][:], dtype=np.float32),
                             np.asarray(g["normals"][:], dtype=np.float32),
-                            np.asarray(g["edges"][:], dtype=np.int64))
+                            np.asarray(g["edges"][:], dtype=np.int64),
+                            np.asarray(g["faces"][:], dtype=np.int64))
 
     def pairs(self, mesh_id: str) -> tuple[np.ndarray, np.ndarray]:
         """All stored pairs (P, 2) int64 and their distances (P,) float32."""
@@ -101,6 +105,7 @@ class Sample:
     graph: Graph
     pairs: Tensor      # long (P, 2), local vertex indices
     distances: Tensor  # float (P,)
+    fields: Tensor | None = None  # float (N, K) landmark distance fields, for a landmark-guided model
 
 
 @dataclass
@@ -111,34 +116,40 @@ class Batch:
     pairs: Tensor
     distances: Tensor
     mesh_ids: tuple[str, ...]
+    fields: Tensor | None = None
 
     def to(self, device) -> "Batch":
         return Batch(self.hierarchy.to(device), self.pairs.to(device, non_blocking=True),
-                     self.distances.to(device, non_blocking=True), self.mesh_ids)
+                     self.distances.to(device, non_blocking=True), self.mesh_ids,
+                     None if self.fields is None else self.fields.to(device, non_blocking=True))
 
 
 def sample_mesh(geometry: MeshGeometry, pairs: np.ndarray, distances: np.ndarray,
-                rng: np.random.Generator | None, num_pairs: int | None, rotate: bool) -> Sample:
+                rng: np.random.Generator | None, num_pairs: int | None, rotate: bool,
+                fields: np.ndarray | None = None) -> Sample:
     """Pick ``num_pairs`` stored pairs (all if None or more than stored) and, with ``rotate``, rotate
-    coordinates and normals by one random rotation (distances are invariant, the network is not)."""
+    coordinates and normals by one random rotation (distances are invariant, the network is not).
+    ``fields``: the mesh's landmark distance fields (N, K), for a landmark-guided model."""
     v, n = geometry.vertices, geometry.normals
     if rotate:
         r = random_rotation(rng).astype(np.float32)
         v, n = v @ r.T, n @ r.T
     if num_pairs is not None and num_pairs < len(pairs):
-        pick = rng.choice(len(pairs), num_pairs, replace=False)
-        pairs, distances = pairs[pick], distances[pick]
+        keep = rng.choice(len(pairs), num_pairs, replace=False)
+        pairs, distances = pairs[keep], distances[keep]
     graph = Graph(pos=torch.from_numpy(np.ascontiguousarray(v)), normal=torch.from_numpy(np.ascontiguousarray(n)),
                   edge_index=directed_edges(torch.from_numpy(geometry.edges)),
                   batch=torch.zeros(len(v), dtype=torch.long))
-    return Sample(graph, torch.from_numpy(pairs), torch.from_numpy(distances))
+    return Sample(graph, torch.from_numpy(pairs), torch.from_numpy(distances),
+                  None if fields is None else torch.from_numpy(fields))
 
 
 def make_batch(samples: list[Sample], mesh_ids, levels: int, sigma_c: float, sigma_n: float) -> Batch:
     union, offsets = disjoint_union([s.graph for s in samples])
     pairs = torch.cat([s.pairs + o for s, o in zip(samples, offsets.tolist())])
+    fields = torch.cat([s.fields for s in samples]) if samples[0].fields is not None else None
     return Batch(build_hierarchy(union, levels, sigma_c, sigma_n), pairs,
-                 torch.cat([s.distances for s in samples]), tuple(mesh_ids))
+                 torch.cat([s.distances for s in samples]), tuple(mesh_ids), fields)
 
 
 class BatchDataset(torch.utils.data.Dataset):
@@ -151,13 +162,18 @@ class BatchDataset(torch.utils.data.Dataset):
         num_pairs: pairs per mesh (None: all stored pairs).
         rotate: random rotation augmentation.
         levels, sigma_c, sigma_n: the model's GeoPool settings.
+        landmarks: K landmark fields per mesh (0: none). Training draws one of ``LANDMARK_DRAWS``
+            landmark choices (seeds) per (epoch, mesh) as augmentation; validation uses seed 0, as
+            ``GeGnn.embed`` does. Fields are computed once per (mesh, seed) and kept (1.3 MB for K = 64
+            on 5k vertices).
     """
 
-    def __init__(self, store_path, distance, seed, num_pairs, rotate, levels, sigma_c, sigma_n):
+    def __init__(self, store_path, distance, seed, num_pairs, rotate, levels, sigma_c, sigma_n,
+                 landmarks: int = 0):
         self.store_path, self.distance, self.seed = str(store_path), distance, seed
-        self.num_pairs, self.rotate = num_pairs, rotate
+        self.num_pairs, self.rotate, self.landmarks = num_pairs, rotate, landmarks
         self.levels, self.sigma_c, self.sigma_n = levels, sigma_c, sigma_n
-        self._store, self._geometries = None, {}
+        self._store, self._geometries, self._fields = None, {}, {}
 
     @property
     def store(self) -> GeodesicStore:
@@ -173,8 +189,11 @@ class BatchDataset(torch.utils.data.Dataset):
     def sample(self, epoch: int, mesh_id: str) -> Sample:
         rng = np.random.default_rng([self.seed, epoch + 1, mesh_hash(mesh_id)])  # epoch -1 -> 0 is val
         pairs, distances = self.store.pairs(mesh_id)
+        fields = None
+        if self.landmarks:
+            fields = self._landmark_fields(mesh_id, 0 if epoch == VAL_EPOCH else int(rng.integers(LANDMARK_DRAWS)))
         return sample_mesh(self._geometry(mesh_id), pairs, distances, rng, self.num_pairs,
-                           self.rotate and epoch != VAL_EPOCH)
+                           self.rotate and epoch != VAL_EPOCH, fields)
 
     def _geometry(self, mesh_id: str) -> MeshGeometry:
         # Geometry is small (~200 kB per 5k-vertex mesh) and kept; pairs (~7 MB) are read per use.
@@ -182,8 +201,14 @@ class BatchDataset(torch.utils.data.Dataset):
             self._geometries[mesh_id] = self.store.geometry(mesh_id)
         return self._geometries[mesh_id]
 
+    def _landmark_fields(self, mesh_id: str, seed: int) -> np.ndarray:
+        if (mesh_id, seed) not in self._fields:
+            g = self._geometry(mesh_id)
+            self._fields[mesh_id, seed] = landmark_fields(g.vertices, g.faces, self.landmarks, seed).distances
+        return self._fields[mesh_id, seed]
+
     def __getstate__(self):  # worker processes reopen the store themselves
-        return {**self.__dict__, "_store": None, "_geometries": {}}
+        return {**self.__dict__, "_store": None, "_geometries": {}, "_fields": {}}
 
 
 class EpochSampler(torch.utils.data.Sampler):

@@ -17,13 +17,14 @@ def _bf16_is_fast(device: torch.device) -> bool:
 
 
 class Embedding:
-    """The result of :meth:`gegnn.GeGnn.embed`: embeddings (N, D) plus the decoder and the mesh scale.
+    """The result of :meth:`gegnn.GeGnn.embed`: per-vertex codes (N, C) plus the decoder and the mesh scale.
 
     Distances come back in the units of the mesh that was embedded.
 
     Args:
-        features: embeddings, (N, D).
-        decoder: the model's :class:`gegnn.model.DistanceDecoder`.
+        features: vertex codes (N, C): the embeddings, or for a landmark-guided model the embeddings
+            with the landmark fields and positions (:meth:`gegnn.decoders.LandmarkDecoder.codes`).
+        decoder: the model's :class:`gegnn.decoders.DistanceDecoder` or ``LandmarkDecoder``.
         scale: factor from normalized units to the input's units.
         precision: ``"auto"`` (bf16 decoder where bf16 matmuls are fast, else fp32), ``"bf16"`` or
             ``"fp32"``. bf16 changes distances by ~0.3% relative (median), well below the model's error.
@@ -72,9 +73,10 @@ class Embedding:
     def _decode(self, i: Tensor, j: Tensor) -> Tensor:
         if self._layers is None:  # Euclidean decoder: no MLP, fp32 is cheap
             return (self.features[i] - self.features[j]).norm(dim=1)
-        x = (self.features[i] - self.features[j]).square_().to(self.dtype)
+        x, extra = self.decoder.inputs(self.features[i], self.features[j])
+        x = x.to(self.dtype)
         *hidden, (w_out, b_out) = self._layers
         for w, b in hidden:  # fused bias add, in-place ReLU: fewer passes over memory
             x = torch.addmm(b, x, w).relu_()
         # The last layer is a dot product: fp32 costs nothing and avoids a bf16 rounding of the output.
-        return (x.float() @ w_out.float()).squeeze(1).add_(b_out.float()).abs_()
+        return self.decoder.output((x.float() @ w_out.float()).add_(b_out.float()), extra)

@@ -14,12 +14,18 @@ from torch import Tensor, nn
 from geodata.mesh import Mesh, unique_edges, vertex_normals
 from geodata.stages.normalize import normalization
 
+from .decoders import DistanceDecoder, LandmarkDecoder
 from .graph import Graph, directed_edges
+from .landmarks import landmark_fields
 from .nn import GeoConv, GeoPool, GeoUnpool, Hierarchy, ResBlocks, build_hierarchy
 
-__all__ = ["GeGnnConfig", "GeGnn", "DistanceDecoder"]
+__all__ = ["GeGnnConfig", "GeGnn", "DistanceDecoder", "LandmarkDecoder"]
 
-PRETRAINED = "gegnn-classic-v1.safetensors"  # in gegnn/weights/, made by `gegnn export`
+# Shipped models, in gegnn/weights/, made by `gegnn export` (docs/model-card.md); the first is the default.
+PRETRAINED = {
+    "landmark": "gegnn-landmark-v1.safetensors",  # landmark-guided, the most accurate
+    "paper": "gegnn-classic-v1.safetensors",      # the paper's model (no landmarks)
+}
 
 
 @dataclass(frozen=True)
@@ -44,6 +50,13 @@ class GeGnnConfig:
     relative_position: bool = True            # v_i - v_j in GeoConv
     edge_length: bool = True                  # |v_i - v_j| in GeoConv
     decoder: str = "mlp"                      # "mlp" | "euclidean" (distance = ||e_i - e_j||)
+    # Landmark guidance (this project's extension; 0 = the paper's model): K landmark distance fields
+    # per component, decoded together with the embeddings by a LandmarkDecoder.
+    landmarks: int = 0
+    landmark_top: int = 4                     # sorted |d_ik - d_jk| and d_ik + d_jk values the decoder reads
+    landmark_embedding: bool = True           # the decoder reads the embedding difference
+    landmark_euclidean: bool = True           # ... and the straight-line distance
+    landmark_output: str = "ratio"            # "ratio": d = L exp(MLP); "interval": d = L + (U - L) sigmoid(MLP)
 
     def __post_init__(self):
         object.__setattr__(self, "encoder_blocks", tuple(self.encoder_blocks))
@@ -54,6 +67,11 @@ class GeGnnConfig:
             raise ValueError(f"channels ({self.channels}) must be divisible by groups ({self.groups})")
         if self.decoder not in ("mlp", "euclidean"):
             raise ValueError(f"decoder must be 'mlp' or 'euclidean', got {self.decoder!r}")
+        if self.landmark_output not in ("ratio", "interval"):
+            raise ValueError(f"landmark_output must be 'ratio' or 'interval', got {self.landmark_output!r}")
+        if self.landmarks < 0 or (self.landmarks and not 1 <= self.landmark_top <= self.landmarks):
+            raise ValueError(f"need landmarks >= 0 and 1 <= landmark_top <= landmarks, got "
+                             f"{self.landmarks}, {self.landmark_top}")
 
     @property
     def levels(self) -> int:
@@ -66,31 +84,6 @@ class GeGnnConfig:
     @classmethod
     def from_json(cls, text: str) -> "GeGnnConfig":
         return cls(**json.loads(text))
-
-
-class DistanceDecoder(nn.Module):
-    r"""Distance between two embeddings.
-
-    ``"mlp"`` (paper): :math:`d_{ij} = |\mathrm{MLP}((\mathbf{e}_i - \mathbf{e}_j)^2)|`, symmetric by
-    construction. The final absolute value keeps predictions non-negative while, unlike a ReLU, never
-    cutting the gradient. ``"euclidean"`` (ablation): :math:`d_{ij} = \|\mathbf{e}_i - \mathbf{e}_j\|`.
-
-    Shapes:
-        - **input:** :math:`(P, D)`, :math:`(P, D)`
-        - **output:** :math:`(P,)`
-    """
-
-    def __init__(self, embed_dim: int, hidden: int, kind: str = "mlp"):
-        super().__init__()
-        self.kind = kind
-        self.mlp = nn.Sequential(nn.Linear(embed_dim, hidden), nn.ReLU(), nn.Linear(hidden, hidden),
-                                 nn.ReLU(), nn.Linear(hidden, 1)) if kind == "mlp" else None
-
-    def forward(self, a: Tensor, b: Tensor) -> Tensor:
-        sq = (a - b).square()
-        if self.mlp is None:
-            return (sq.sum(dim=1) + 1e-12).sqrt()  # eps: finite gradient at a == b
-        return self.mlp(sq).squeeze(1).abs()
 
 
 class GeGnn(nn.Module):
@@ -114,7 +107,12 @@ class GeGnn(nn.Module):
                                      for n in config.decoder_blocks)
         self.head = nn.Sequential(nn.Linear(c, c, bias=False), nn.GroupNorm(config.groups, c), nn.ReLU(),
                                   nn.Linear(c, config.embed_dim))
-        self.distance = DistanceDecoder(config.embed_dim, config.decoder_hidden, config.decoder)
+        if config.landmarks:
+            self.distance = LandmarkDecoder(config.embed_dim, config.landmarks, config.decoder_hidden,
+                                            config.landmark_top, config.landmark_embedding,
+                                            config.landmark_euclidean, config.landmark_output)
+        else:
+            self.distance = DistanceDecoder(config.embed_dim, config.decoder_hidden, config.decoder)
 
     # -- graphs -------------------------------------------------------------------------------------
     @staticmethod
@@ -130,15 +128,21 @@ class GeGnn(nn.Module):
         return build_hierarchy(graph, self.config.levels, self.config.sigma_c, self.config.sigma_n)
 
     # -- network ------------------------------------------------------------------------------------
-    def forward(self, h: Hierarchy, pairs: Tensor | None = None) -> Tensor:
-        """Embeddings (N, embed_dim) of the level-0 vertices of ``h``; with ``pairs`` (P, 2) indexing
-        those vertices, the decoded distances (P,) instead (one call, so DistributedDataParallel sees
-        the decoder's parameters used inside forward)."""
-        e = self.head(self._unet(h))
+    def forward(self, h: Hierarchy, pairs: Tensor | None = None, fields: Tensor | None = None) -> Tensor:
+        """Vertex codes of the level-0 vertices of ``h``: the embeddings (N, embed_dim), or with
+        landmarks the decoder's codes ``[e | fields | pos]`` (``fields``: (N, K) landmark distances in
+        normalized units). With ``pairs`` (P, 2) indexing those vertices, the decoded distances (P,)
+        instead (one call, so DistributedDataParallel sees the decoder's parameters used inside forward)."""
+        z = self.head(self._unet(h))
+        if self.config.landmarks:
+            if fields is None or fields.shape != (len(z), self.config.landmarks):
+                raise ValueError(f"a model with landmarks={self.config.landmarks} needs fields of shape "
+                                 f"({len(z)}, {self.config.landmarks})")
+            z = LandmarkDecoder.codes(z, fields, h.graphs[0].pos)
         if pairs is None:
-            return e
+            return z
         pairs = pairs.long()
-        return self.distance(e[pairs[:, 0]], e[pairs[:, 1]])
+        return self.distance(z[pairs[:, 0]], z[pairs[:, 1]])
 
     def _unet(self, h: Hierarchy) -> Tensor:
         g = h.graphs[0]
@@ -178,13 +182,17 @@ class GeGnn(nn.Module):
         mesh = Mesh((vertices - center) / scale, faces)
         graph = self.mesh_graph(mesh.vertices, vertex_normals(mesh).astype(np.float32), unique_edges(mesh.faces))
         device = torch.device(device) if device else next(self.parameters()).device
+        fields = None
+        if self.config.landmarks:
+            fields = torch.as_tensor(landmark_fields(mesh.vertices, mesh.faces, self.config.landmarks).distances,
+                                     device=device)
         was_training = self.training
         self.eval()
         h = self.hierarchy(graph).to(device)
         with torch.autocast(device.type, dtype=torch.bfloat16, enabled=precision == "bf16"):
-            features = self(h).float()
+            codes = self(h, fields=fields).float()
         self.train(was_training)
-        return Embedding(features, self.distance, scale)
+        return Embedding(codes, self.distance, scale)
 
     # -- checkpoints ------------------------------------------------------------------------------------
     def save(self, path, metadata: dict | None = None) -> None:
@@ -193,11 +201,19 @@ class GeGnn(nn.Module):
         save_checkpoint(path, self, metadata=metadata)
 
     @classmethod
-    def pretrained(cls, map_location="cpu") -> "GeGnn":
-        """The model shipped in the package (fp16 weights; see docs/model-card.md for data and accuracy)."""
+    def pretrained(cls, name: str | None = None, map_location="cpu") -> "GeGnn":
+        """A model shipped in the package (fp16 weights; docs/model-card.md has data and accuracy).
+
+        Args:
+            name: a key of :data:`PRETRAINED`: ``"landmark"`` (the default: the most accurate) or
+                ``"paper"`` (the paper's model).
+        """
         from importlib.resources import as_file, files
 
-        with as_file(files("gegnn") / "weights" / PRETRAINED) as path:
+        name = name or next(iter(PRETRAINED))
+        if name not in PRETRAINED:
+            raise ValueError(f"no pretrained model {name!r}; shipped: {', '.join(PRETRAINED)}")
+        with as_file(files("gegnn") / "weights" / PRETRAINED[name]) as path:
             return cls.from_checkpoint(path, map_location)
 
     @classmethod

@@ -106,7 +106,7 @@ def train_step(model, batch, optimizer, lr: float, clip_grad: float, device) -> 
     for group in optimizer.param_groups:
         group["lr"] = lr
     with torch.autocast("cuda", dtype=torch.bfloat16, enabled=device.type == "cuda"):
-        pred = model(batch.hierarchy, batch.pairs)
+        pred = model(batch.hierarchy, batch.pairs, batch.fields)
     loss = relative_error(pred, batch.distances).mean()
     optimizer.zero_grad(set_to_none=True)
     loss.backward()
@@ -139,7 +139,7 @@ def validate(model, dataset: BatchDataset, mesh_ids, device, ctx: Dist) -> float
     for mesh_id in mesh_ids[ctx.rank::ctx.world]:
         batch = dataset[(VAL_EPOCH, (mesh_id,))].to(device)
         with torch.autocast("cuda", dtype=torch.bfloat16, enabled=device.type == "cuda"):
-            pred = model(batch.hierarchy, batch.pairs)
+            pred = model(batch.hierarchy, batch.pairs, batch.fields)
         e = relative_error(pred, batch.distances)
         err, count = err + e.sum().item(), count + e.numel()
     err, count = all_sum([err, count], ctx, device)
@@ -233,7 +233,7 @@ def train(cfg: TrainConfig, model_config: GeGnnConfig | None = None) -> list[dic
     log = run_logger(run, ctx.main)
 
     torch.manual_seed(cfg.seed)
-    model, optimizer, start_epoch, step, best = build_model(cfg, model_config, resume, device)
+    model, optimizer, start_epoch, step, best = build_model(cfg, model_config, resume, device, log)
     net = torch.nn.parallel.DistributedDataParallel(model) if ctx.world > 1 else model
 
     store = GeodesicStore(cfg.store, cfg.distance)
@@ -244,7 +244,8 @@ def train(cfg: TrainConfig, model_config: GeGnnConfig | None = None) -> list[dic
     if not train_ids:
         raise ValueError(f"{cfg.store}: no committed meshes with {cfg.distance} distances")
     dataset, val_dataset = (BatchDataset(path, cfg.distance, cfg.seed, cfg.pairs_per_mesh, cfg.rotate,
-                                         model.config.levels, model.config.sigma_c, model.config.sigma_n)
+                                         model.config.levels, model.config.sigma_c, model.config.sigma_n,
+                                         model.config.landmarks)
                             for path in (cfg.store, cfg.val_store or cfg.store))
     sampler = EpochSampler(train_ids, cfg.seed, cfg.batch_size, ctx.rank, ctx.world)
     loader = make_loader(dataset, sampler, cfg.workers, device)
@@ -277,16 +278,24 @@ def train(cfg: TrainConfig, model_config: GeGnnConfig | None = None) -> list[dic
     return rows
 
 
-def build_model(cfg: TrainConfig, model_config, resume, device):
-    """Model and optimizer, fresh, from ``--init`` weights, or restored from ``--resume``."""
+def build_model(cfg: TrainConfig, model_config, resume, device, log=None):
+    """Model and optimizer, fresh, from ``--init`` weights, or restored from ``--resume``.
+
+    With ``--init`` the network is the checkpoint's; where ``model_config`` asks for landmarks, its
+    landmark options replace the checkpoint's, so a paper model's weights can start a landmark-guided
+    one (the new decoder starts fresh)."""
     if resume is not None:
         model_config = resume.config
     elif cfg.init:
         init = load_checkpoint(cfg.init)
-        model_config = init.config
+        guide = {f.name: getattr(model_config, f.name) for f in dataclasses.fields(GeGnnConfig)
+                 if f.name.startswith("landmark")} if model_config is not None and model_config.landmarks else {}
+        model_config = dataclasses.replace(init.config, **guide)
     model = GeGnn(model_config or GeGnnConfig())
     if cfg.init and resume is None:
-        model.load_state_dict(init.model_state)
+        fresh = load_matching(model, init.model_state)
+        if fresh and log is not None:
+            log.info(f"--init {cfg.init}: {len(fresh)} tensors start fresh ({', '.join(sorted(fresh)[:4])}...)")
     model.to(device)
     optimizer = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     if resume is None:
@@ -296,6 +305,15 @@ def build_model(cfg: TrainConfig, model_config, resume, device):
     restore_rng(resume.rng)
     state = resume.metadata["trainer"]
     return model, optimizer, state["epoch"] + 1, state["step"], state["best"]
+
+
+def load_matching(model, state: dict) -> list[str]:
+    """Load the tensors of ``state`` whose name and shape match ``model``'s; returns the names left as
+    initialized. A checkpoint with the same config loads whole (nothing is left)."""
+    own = model.state_dict()
+    matching = {k: v for k, v in state.items() if k in own and own[k].shape == v.shape}
+    model.load_state_dict(matching, strict=False)
+    return [k for k in own if k not in matching]
 
 
 def save_run(run: Path, model, optimizer, cfg, epoch, step, best, rows, improved, plot=True) -> None:
@@ -330,11 +348,11 @@ def evaluate_store(model: GeGnn, store_path, distance: str = "geodesic", mesh_id
     device = torch.device(device)
     model.to(device).eval()
     dataset = BatchDataset(store_path, distance, 0, None, False, model.config.levels,
-                           model.config.sigma_c, model.config.sigma_n)
+                           model.config.sigma_c, model.config.sigma_n, model.config.landmarks)
     rows = []
     for mesh_id in tqdm(mesh_ids or dataset.store.mesh_ids, desc="eval", leave=False):
         batch = dataset[(VAL_EPOCH, (mesh_id,))].to(device)
-        e = model(batch.hierarchy)
+        e = model(batch.hierarchy, fields=batch.fields)
         err = torch.cat([relative_error(model.distance(e[p[:, 0]], e[p[:, 1]]), d) for p, d in
                          zip(batch.pairs.split(chunk), batch.distances.split(chunk))])
         rows.append(dict(mesh_id=mesh_id, vertices=e.shape[0], pairs=err.numel(), mre=err.mean().item(),

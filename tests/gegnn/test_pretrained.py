@@ -1,4 +1,4 @@
-"""The model shipped in the package: small fp16 safetensors that loads alone and knows the sphere."""
+"""The models shipped in the package: small fp16 safetensors that load alone and know the sphere."""
 from importlib.resources import files
 
 import numpy as np
@@ -10,13 +10,19 @@ from safetensors import safe_open
 from gegnn import GeGnn
 from gegnn.model import PRETRAINED
 
-WEIGHTS = files("gegnn") / "weights" / PRETRAINED
 
-
-def test_weights_are_fp16_safetensors_under_16_mib():
-    assert WEIGHTS.is_file() and WEIGHTS.stat().st_size <= 16 * 2**20
-    with safe_open(str(WEIGHTS), framework="pt") as f:
+@pytest.mark.parametrize("name", list(PRETRAINED))
+def test_weights_are_fp16_safetensors_under_16_mib(name):
+    weights = files("gegnn") / "weights" / PRETRAINED[name]
+    assert weights.is_file() and weights.stat().st_size <= 16 * 2**20
+    with safe_open(str(weights), framework="pt") as f:
         assert {f.get_tensor(k).dtype for k in f.keys() if f.get_tensor(k).is_floating_point()} == {torch.float16}
+
+
+def test_default_is_the_landmark_model_and_names_are_checked():
+    assert GeGnn.pretrained().config.landmarks > 0
+    with pytest.raises(ValueError, match="shipped: landmark, paper"):
+        GeGnn.pretrained("nonexistent")
 
 
 @pytest.fixture(scope="module")

@@ -1,0 +1,134 @@
+r"""Pair decoders: per-vertex codes of two vertices to their distance.
+
+Every decoder splits into ``inputs`` (the symmetric pair features and what the output needs) and
+``output`` (the MLP's value to a distance), so :class:`gegnn.embedding.Embedding` can run the MLP in its
+own fast path between the two.
+"""
+from __future__ import annotations
+
+import torch
+from torch import Tensor, nn
+
+__all__ = ["DistanceDecoder", "LandmarkDecoder", "mlp"]
+
+MAX_LOG_RATIO = 5.0  # a ratio decoder never predicts more than e^5 = 148 times the lower bound
+
+
+def mlp(n_in: int, hidden: int) -> nn.Sequential:
+    """n_in -> hidden -> hidden -> 1 with ReLUs."""
+    return nn.Sequential(nn.Linear(n_in, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU(),
+                         nn.Linear(hidden, 1))
+
+
+class DistanceDecoder(nn.Module):
+    r"""Distance between two embeddings (the paper's decoder).
+
+    ``"mlp"``: :math:`d_{ij} = |\mathrm{MLP}((\mathbf{e}_i - \mathbf{e}_j)^2)|`, symmetric by
+    construction. The final absolute value keeps predictions non-negative while, unlike a ReLU, never
+    cutting the gradient. ``"euclidean"`` (ablation): :math:`d_{ij} = \|\mathbf{e}_i - \mathbf{e}_j\|`.
+
+    Shapes:
+        - **input:** :math:`(P, D)`, :math:`(P, D)`
+        - **output:** :math:`(P,)`
+    """
+
+    def __init__(self, embed_dim: int, hidden: int, kind: str = "mlp"):
+        super().__init__()
+        self.kind = kind
+        self.mlp = mlp(embed_dim, hidden) if kind == "mlp" else None
+
+    def inputs(self, a: Tensor, b: Tensor) -> tuple[Tensor, None]:
+        return (a - b).square(), None
+
+    def output(self, t: Tensor, extra=None) -> Tensor:
+        return t.squeeze(1).abs()
+
+    def forward(self, a: Tensor, b: Tensor) -> Tensor:
+        x, extra = self.inputs(a, b)
+        if self.mlp is None:
+            return (x.sum(dim=1) + 1e-12).sqrt()  # eps: finite gradient at a == b
+        return self.output(self.mlp(x), extra)
+
+
+class LandmarkDecoder(nn.Module):
+    r"""Distance from embeddings and landmark distance fields (landmark-guided GeGnn).
+
+    With :math:`f_{ik}` the distance of vertex :math:`i` to landmark :math:`k` of its component, the
+    triangle inequality bounds the distance by :math:`L = \max_k |f_{ik} - f_{jk}|` and
+    :math:`U = \min_k f_{ik} + f_{jk}`. An MLP corrects the lower bound:
+
+    .. math::
+        d_{ij} = L\, e^{\mathrm{MLP}(\mathbf{x}_{ij})} \quad (\text{``ratio''}),\qquad
+        d_{ij} = L + (U - L)\, \sigma(\mathrm{MLP}(\mathbf{x}_{ij})) \quad (\text{``interval''}),
+
+        \mathbf{x}_{ij} = \big[(\mathbf{e}_i - \mathbf{e}_j)^2,\; a_{(1..m)} / U,\;
+        s_{(1..m)} / U - 1,\; \|\mathbf{p}_i - \mathbf{p}_j\| / U,\; \log U\big]
+
+    where :math:`a_{(1..m)}` are the ``top`` largest :math:`|f_{ik} - f_{jk}|` (so :math:`a_{(1)} = L`),
+    :math:`s_{(1..m)}` the ``top`` smallest :math:`f_{ik} + f_{jk}` (:math:`s_{(1)} = U`) and
+    :math:`\mathbf{p}` the normalized positions. Sorted values make it invariant to the order of the
+    landmarks; every feature is symmetric in (i, j); a query costs O(K). The distance is exactly 0 where
+    no landmark separates the two vertices (L = 0), e.g. i = j.
+
+    The ratio form starts as the bound itself (the last layer is zero) and may leave [L, U]: with
+    heat-method fields the true distance lies outside it for about half of the pairs (the interval
+    form's floor is 0.66% MRE at K = 64 on the validation meshes).
+
+    A vertex code is ``[e (embed_dim) | f (K) | p (3)]`` (see :meth:`codes`).
+
+    Args:
+        embed_dim: embedding width D.
+        landmarks: K.
+        hidden: MLP width.
+        top: m, sorted values of each kind read (1: the bounds alone).
+        embedding: read the embedding difference (off: the decoder sees landmarks only).
+        euclidean: read the straight-line distance.
+        output: ``"ratio"`` or ``"interval"`` (ablation).
+
+    Shapes:
+        - **input:** :math:`(P, D + K + 3)`, :math:`(P, D + K + 3)`
+        - **output:** :math:`(P,)`
+    """
+
+    def __init__(self, embed_dim: int, landmarks: int, hidden: int, top: int = 4, embedding: bool = True,
+                 euclidean: bool = True, output: str = "ratio"):
+        super().__init__()
+        self.embed_dim, self.k, self.top = embed_dim, landmarks, top
+        self.embedding, self.euclidean, self.kind = embedding, euclidean, output
+        n_in = (embed_dim if embedding else 0) + 2 * top + (1 if euclidean else 0) + 1
+        self.mlp = mlp(n_in, hidden)
+        if output == "ratio":  # start as the lower bound itself
+            nn.init.zeros_(self.mlp[-1].weight)
+            nn.init.zeros_(self.mlp[-1].bias)
+
+    @staticmethod
+    def codes(embeddings: Tensor, fields: Tensor, positions: Tensor) -> Tensor:
+        """Per-vertex codes ``[e | f | p]`` (N, D + K + 3) in fp32."""
+        return torch.cat([embeddings.float(), fields.float(), positions.float()], dim=1)
+
+    def inputs(self, a: Tensor, b: Tensor) -> tuple[Tensor, tuple[Tensor, Tensor]]:
+        d, k = self.embed_dim, self.k
+        fa, fb = a[:, d:d + k], b[:, d:d + k]
+        sep = (fa - fb).abs().topk(self.top, dim=1).values          # descending: sep[:, 0] = L
+        via = (fa + fb).neg_().topk(self.top, dim=1).values.neg_()  # ascending:  via[:, 0] = U
+        lower, upper = sep[:, 0], via[:, 0]
+        u = upper.clamp_min(1e-6).unsqueeze(1)
+        parts = [(a[:, :d] - b[:, :d]).square()] if self.embedding else []
+        parts += [sep / u, via / u - 1]
+        if self.euclidean:
+            parts.append((a[:, d + k:] - b[:, d + k:]).norm(dim=1, keepdim=True) / u)
+        parts.append(u.log())
+        return torch.cat(parts, dim=1), (lower, upper)
+
+    def output(self, t: Tensor, extra: tuple[Tensor, Tensor]) -> Tensor:
+        lower, upper = extra
+        t = t.squeeze(1).float()
+        if self.kind == "ratio":
+            d = lower * t.clamp(max=MAX_LOG_RATIO).exp()
+        else:
+            d = lower + (upper - lower).clamp_min(0) * torch.sigmoid(t)
+        return torch.where(lower > 0, d, torch.zeros_like(d))
+
+    def forward(self, a: Tensor, b: Tensor) -> Tensor:
+        x, extra = self.inputs(a, b)
+        return self.output(self.mlp(x), extra)
