@@ -1,16 +1,21 @@
-"""Accuracy report of a GeGnn checkpoint on a validation store: writes docs/results.md and its pictures.
+"""Accuracy report of the landmark-guided and the paper GeGnn on a validation store: writes
+docs/results.md and its pictures.
 
     python benchmarks/bench_results.py data/val.zarr [--checkpoint CKPT] [--out docs]
 
 For every mesh of the store, over all its stored pairs (sources x every vertex), the mean relative
 error |d - d*| / (d* + 1e-3) (the training metric, normalized units) of:
-  - GeGnn (the shipped model unless --checkpoint),
+  - GeGnn (the shipped default, landmark-guided, unless --checkpoint),
+  - the shipped paper model (`GeGnn.pretrained("paper")`),
+  - the landmark lower bound max_k |d_ik - d_jk| alone (the same K fields the model reads),
   - the heat method (potpourri3d, t = mean edge length squared, one factorization per mesh),
   - plain Euclidean distance,
-  - GeGnn and the heat method on a damaged copy: 15% of the triangles removed at random and Gaussian
-    noise (sigma = 0.1 x mean edge length) on every vertex, against the clean mesh's exact distances.
-Timings (CPU, this machine; GPU too when one is visible): one embed and 1M queries on the
-largest mesh, against the heat method's field from one source measured in the same run.
+  - both models and the heat method on a damaged copy: 15% of the triangles removed at random and
+    Gaussian noise (sigma = 0.1 x mean edge length) on every vertex, against the clean mesh's exact
+    distances.
+Timings (CPU, this machine; GPU too when one is visible): precomputation (landmark fields, one forward
+pass) and 1M queries on the largest mesh, against the heat method for the same pairs, measured in the
+same run.
 """
 from __future__ import annotations
 
@@ -25,11 +30,15 @@ import torch
 
 from gegnn import Embedding, GeGnn
 from gegnn.data import GeodesicStore
+from gegnn.landmarks import landmark_fields
 from gegnn.render import Panel, Row, save_panels
 from gegnn.train import METRIC_EPS
 from geodata.mesh import unique_edges
 
 import bench_gegnn  # benchmarks/ is on sys.path when a script there runs
+
+
+LANDMARKS = 64  # K of the bound-alone column when the model has no landmarks
 
 
 def mre(pred, exact) -> float:
@@ -59,9 +68,9 @@ def compact(v, f):
     return v[used], remap[f], remap
 
 
-def evaluate_mesh(model, store, mesh_id, rng):
+def evaluate_mesh(model, paper, store, mesh_id, rng):
     g = store.geometry(mesh_id)
-    faces = np.asarray(store.root[f"meshes/{mesh_id}/faces"][:], dtype=np.int64)
+    faces = g.faces
     v = g.vertices.astype(np.float64)
     pairs, exact = store.pairs(mesh_id)
     exact = exact.astype(np.float64)
@@ -69,6 +78,10 @@ def evaluate_mesh(model, store, mesh_id, rng):
     row = dict(mesh=mesh_id, vertices=len(v), pairs=len(pairs))
     emb = model.embed(v, faces)
     row["gegnn"] = mre(emb.distance(i, j), exact)
+    paper_emb = paper.embed(v, faces)
+    row["paper"] = mre(paper_emb.distance(i, j), exact)
+    fields = landmark_fields(v, faces, model.config.landmarks or LANDMARKS).distances
+    row["bound"] = mre(np.abs(fields[i] - fields[j]).max(axis=1), exact)
     sources = np.unique(i)
     heat = heat_fields(v, faces, sources)
     row["heat"] = mre(np.concatenate([heat[s][j[i == s]] for s in sources]),
@@ -80,6 +93,7 @@ def evaluate_mesh(model, store, mesh_id, rng):
     ok = (remap[i] >= 0) & (remap[j] >= 0)
     ci, cj = remap[i[ok]], remap[j[ok]]
     row["gegnn_damaged"] = mre(model.embed(cv, cf).distance(ci, cj), exact[ok])
+    row["paper_damaged"] = mre(paper.embed(cv, cf).distance(ci, cj), exact[ok])
     src = np.unique(ci)
     heat_d = heat_fields(cv, cf, src)
     row["heat_damaged"] = mre(np.concatenate([heat_d[s][cj[ci == s]] for s in src]),
@@ -87,7 +101,7 @@ def evaluate_mesh(model, store, mesh_id, rng):
     s = int(i[0])  # the first stored source, for the picture grid: its exact field over all vertices
     exact_field = np.zeros(len(v))
     exact_field[j[i == s]] = exact[i == s]
-    row["_picture"] = (v, faces, s, emb.field(s), exact_field)
+    row["_picture"] = (v, faces, s, emb.field(s), paper_emb.field(s), exact_field)
     return row
 
 
@@ -95,31 +109,39 @@ def timed(fn, repeat=3) -> float:
     return bench_gegnn.timed(fn, repeat)[0]
 
 
-def timings(model, v, f, queries=1_000_000) -> list[tuple[str, float]]:
+def timings(model, paper, v, f, queries=1_000_000) -> list[tuple[str, float]]:
     import potpourri3d as pp3d
 
     rng = np.random.default_rng(0)
     qi, qj = rng.integers(0, len(v), queries), rng.integers(0, len(v), queries)
     out = []
+    if model.config.landmarks:
+        k = model.config.landmarks
+        out.append((f"landmark fields ({k} heat-method solves, part of embed)",
+                    timed(lambda: landmark_fields(v, f, k))))
     devices = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
-    for dev in devices:
-        m = model.to(dev)
-        for precision in ("fp32", "bf16"):
-            out.append((f"{dev}: embed, {precision} network", timed(lambda: m.embed(v, f, precision=precision))))
-        features = m.embed(v, f).features
-        for precision in ("fp32", "bf16"):
-            emb = Embedding(features, m.distance, precision=precision)
-            out.append((f"{dev}: 1M queries, {precision} decoder", timed(lambda: emb.distance(qi, qj))))
-    model.to("cpu")
+    for name, net in (("GeGnn", model), ("paper GeGnn", paper)):
+        for dev in devices:
+            m = net.to(dev)
+            for precision in ("fp32", "bf16"):
+                out.append((f"{name}, {dev}: embed, {precision} network",
+                            timed(lambda: m.embed(v, f, precision=precision))))
+            features = m.embed(v, f).features
+            for precision in ("fp32", "bf16"):
+                emb = Embedding(features, m.distance, precision=precision)
+                out.append((f"{name}, {dev}: 1M queries, {precision} decoder", timed(lambda: emb.distance(qi, qj))))
+        net.to("cpu")
+    embed, query = dict(out)["GeGnn, cpu: embed, fp32 network"], dict(out)["GeGnn, cpu: 1M queries, fp32 decoder"]
     solver_time = timed(lambda: pp3d.MeshHeatMethodDistanceSolver(v, f), repeat=1)
     solver = pp3d.MeshHeatMethodDistanceSolver(v, f)
     out.append(("heat method: factorization (once per mesh)", solver_time))
     one_field = timed(lambda: solver.compute_distance(0))
     out.append(("heat method: one source's field", one_field))
     sources = len(np.unique(qi))  # 1M random pairs need a field from every distinct first vertex
-    out.append((f"heat method: 1M random pairs ({sources} fields, estimated)", solver_time + sources * one_field))
-    embed, queries = out[0][1], out[2][1]
-    out.append(("GeGnn: 1M random pairs (fp32 embed + fp32 queries)", embed + queries))
+    heat = solver_time + sources * one_field
+    out.append((f"heat method: 1M random pairs ({sources} fields, estimated)", heat))
+    out.append(("GeGnn: 1M random pairs (fp32 embed + fp32 queries)", embed + query))
+    out.append(("speed-up over the heat method for these pairs (x)", heat / (embed + query)))
     return out
 
 
@@ -137,46 +159,58 @@ def main():
 
     model = GeGnn.pretrained() if not args.checkpoint else GeGnn.from_checkpoint(args.checkpoint)
     model.eval()
+    paper = GeGnn.pretrained("paper").eval()
     store = GeodesicStore(args.store)
     mesh_ids = args.meshes.split(",") if args.meshes else store.mesh_ids
     rows = []
     for k, mesh_id in enumerate(mesh_ids):
-        rows.append(evaluate_mesh(model, store, mesh_id, np.random.default_rng([args.seed, store.mesh_ids.index(mesh_id)])))
-        r = rows[-1]
-        print(f"{mesh_id:40s} gegnn {100 * r['gegnn']:6.2f}%  heat {100 * r['heat']:6.2f}%  "
-              f"euclid {100 * r['euclid']:6.2f}%  damaged: gegnn {100 * r['gegnn_damaged']:6.2f}% "
-              f"heat {100 * r['heat_damaged']:6.2f}%", flush=True)
+        rng = np.random.default_rng([args.seed, store.mesh_ids.index(mesh_id)])
+        rows.append(evaluate_mesh(model, paper, store, mesh_id, rng))
+        print(f"{mesh_id:40s} " + "  ".join(f"{c} {100 * rows[-1][c]:6.2f}%" for c in COLUMNS), flush=True)
 
     out = Path(args.out)
     (out / "img").mkdir(parents=True, exist_ok=True)
     grid_ids = [m for m in args.grid.split(",") if m in mesh_ids]
     grid_rows = []
     for mesh_id in grid_ids:
-        v, f, s, pred, exact = next(r for r in rows if r["mesh"] == mesh_id)["_picture"]
-        err = np.abs(pred - exact) / (exact + METRIC_EPS)
-        err[s] = 0
+        v, f, s, pred, paper_pred, exact = next(r for r in rows if r["mesh"] == mesh_id)["_picture"]
         top = float(exact.max())
-        grid_rows.append(Row(v, f, s, [
-            Panel(pred, f"{mesh_id}: GeGnn", vmin=0, vmax=top),
-            Panel(exact, "exact", vmin=0, vmax=top),
-            Panel(err, f"relative error (mean {100 * err.mean():.1f}%)", "magma", "relative error", 0, 0.1,
-                  isolines=0)]))
+        panels = [Panel(exact, f"{mesh_id}: exact", vmin=0, vmax=top)]
+        for name, field in (("GeGnn", pred), ("paper GeGnn", paper_pred)):
+            err = np.abs(field - exact) / (exact + METRIC_EPS)
+            err[s] = 0
+            panels += [Panel(field, name, vmin=0, vmax=top),
+                       Panel(err, f"{name} error (mean {100 * err.mean():.1f}%)", "magma", "relative error", 0, 0.1,
+                             isolines=0)]
+        grid_rows.append(Row(v, f, s, panels))
     if grid_rows:
         save_panels(out / "img" / "results-grid.png", grid_rows, size=360)
     largest = max(rows, key=lambda r: r["vertices"])
     lv, lf = largest["_picture"][:2]
-    times = timings(model, lv, lf)
+    times = timings(model, paper, lv, lf)
     for name, t in times:
         print(f"{name}: {t:.4g} s")
     write_report(out / "results.md", args, rows, times, largest, grid_ids)
 
 
+COLUMNS = ["gegnn", "paper", "bound", "heat", "euclid", "gegnn_damaged", "paper_damaged", "heat_damaged"]
+HEADERS = ["GeGnn", "paper GeGnn", "landmark bound", "heat method", "Euclidean", "GeGnn, damaged",
+           "paper, damaged", "heat, damaged"]
+
+
+def cpu_description() -> str:
+    """CPU model and whether it has AVX512-BF16 (bf16 matmuls ~3x fp32 there, emulated elsewhere)."""
+    info = Path("/proc/cpuinfo").read_text() if Path("/proc/cpuinfo").exists() else ""
+    model = next((line.split(":", 1)[1].strip() for line in info.splitlines() if line.startswith("model name")),
+                 platform.processor() or platform.machine())
+    return f"{model}, {'with' if 'avx512_bf16' in info else 'without'} AVX512-BF16"
+
+
 def write_report(path, args, rows, times, largest, grid_ids):
-    cols = ["gegnn", "heat", "euclid", "gegnn_damaged", "heat_damaged"]
-    mean = {c: float(np.mean([r[c] for r in rows])) for c in cols}
-    ckpt = args.checkpoint or "the shipped model (`GeGnn.pretrained()`)"
+    mean = {c: float(np.mean([r[c] for r in rows])) for c in COLUMNS}
+    ckpt = args.checkpoint or "the shipped default model (`GeGnn.pretrained()`, landmark-guided)"
     lines = [
-        "# Results: accuracy of the pretrained GeGnn on held-out classic meshes",
+        "# Results: accuracy of the pretrained GeGnn models on held-out classic meshes",
         "",
         "Produced by",
         "",
@@ -185,28 +219,29 @@ def write_report(path, args, rows, times, largest, grid_ids):
                                                                else ""),
         "```",
         "",
-        f"with {ckpt}, on the validation store made by `pipelines/pretrained/data.sh` (the "
-        f"{len(rows)} meshes of `pipelines/pretrained/val.txt`, never trained on, prepared by the geodata "
-        "pipeline: watertight, ~5k vertices, normalized to [-1, 1]). Every stored pair counts: "
-        f"{sum(r['pairs'] for r in rows):,} pairs in all. Metric: mean of |d - d*| / (d* + 1e-3), "
-        "d* the exact polyhedral geodesic distance (the paper's metric).",
+        f"with {ckpt} and the shipped paper model (`GeGnn.pretrained(\"paper\")`), on the validation store "
+        f"made by `pipelines/pretrained/data.sh` (the {len(rows)} meshes of `pipelines/pretrained/val.txt`, "
+        "never trained on, prepared by the geodata pipeline: watertight, ~5k vertices, normalized to "
+        f"[-1, 1]). Every stored pair counts: {sum(r['pairs'] for r in rows):,} pairs in all. Metric: mean of "
+        "|d - d*| / (d* + 1e-3), d* the exact polyhedral geodesic distance (the paper's metric). The "
+        "landmark bound is max_k |d(i, l_k) - d(j, l_k)| over the same heat-method landmark fields the "
+        "GeGnn reads, with no learning.",
         "",
         "Damaged: 15% of the triangles removed at random and Gaussian noise (sigma = 0.1 mean edge length) "
         "on every vertex, compared with the clean mesh's exact distances (the paper's robustness test).",
         "",
-        "| mesh | vertices | GeGnn | heat method | Euclidean | GeGnn, damaged | heat, damaged |",
-        "|---|---:|---:|---:|---:|---:|---:|",
+        "| mesh | vertices | " + " | ".join(HEADERS) + " |",
+        "|---|---:|" + "---:|" * len(COLUMNS),
     ]
     for r in rows:
-        lines.append(f"| {r['mesh']} | {r['vertices']} | " + " | ".join(f"{100 * r[c]:.2f}%" for c in cols) + " |")
-    lines.append("| **mean** | | " + " | ".join(f"**{100 * mean[c]:.2f}%**" for c in cols) + " |")
-    cpu = platform.processor() or platform.machine()
+        lines.append(f"| {r['mesh']} | {r['vertices']} | " + " | ".join(f"{100 * r[c]:.2f}%" for c in COLUMNS) + " |")
+    lines.append("| **mean** | | " + " | ".join(f"**{100 * mean[c]:.2f}%**" for c in COLUMNS) + " |")
     lines += [
         "",
         f"## Timings ({largest['mesh']}, {largest['vertices']} vertices)",
         "",
-        f"Best of 3, {os.cpu_count()} CPU threads ({cpu}); torch {torch.__version__}; Python "
-        f"{sys.version.split()[0]}.",
+        f"Best of 3, {os.cpu_count()} CPU threads ({cpu_description()}); torch {torch.__version__}; Python "
+        f"{sys.version.split()[0]}. The landmark model's embed includes its landmark fields.",
         "",
         "| what | seconds |",
         "|---|---:|",
@@ -214,8 +249,8 @@ def write_report(path, args, rows, times, largest, grid_ids):
     lines += [f"| {name} | {t:.4g} |" for name, t in times]
     if grid_ids:
         lines += ["", "## Predicted vs exact", "",
-                  "One stored source per mesh (red dot); the error panel's scale stops at 10%.", "",
-                  "![predicted, exact and relative error](img/results-grid.png)"]
+                  "One stored source per mesh (red dot); the error panels' scale stops at 10%.", "",
+                  "![exact, landmark GeGnn, paper GeGnn and their relative errors](img/results-grid.png)"]
     Path(path).write_text("\n".join(lines) + "\n")
     print(f"wrote {path}")
 

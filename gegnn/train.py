@@ -293,7 +293,10 @@ def build_model(cfg: TrainConfig, model_config, resume, device, log=None):
         model_config = dataclasses.replace(init.config, **guide)
     model = GeGnn(model_config or GeGnnConfig())
     if cfg.init and resume is None:
-        fresh = load_matching(model, init.model_state)
+        state = init.model_state
+        if model_config != init.config:  # another decoder: none of the old one's weights
+            state = {k: v for k, v in state.items() if not k.startswith("distance.")}
+        fresh = load_matching(model, state)
         if fresh and log is not None:
             log.info(f"--init {cfg.init}: {len(fresh)} tensors start fresh ({', '.join(sorted(fresh)[:4])}...)")
     model.to(device)

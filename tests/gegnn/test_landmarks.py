@@ -169,3 +169,7 @@ def test_init_from_paper_model_keeps_its_network(tiny_store, tmp_path):
     for name, value in paper.state_dict().items():
         if not name.startswith("distance."):
             torch.testing.assert_close(got.model_state[name], value)
+    fresh = GeGnn(got.config).distance
+    for name, value in fresh.state_dict().items():  # the ratio decoder's last layer starts at zero
+        if name.startswith("mlp.4"):
+            torch.testing.assert_close(got.model_state["distance." + name], value)
