@@ -109,8 +109,12 @@ class LandmarkDecoder(nn.Module):
     def inputs(self, a: Tensor, b: Tensor) -> tuple[Tensor, tuple[Tensor, Tensor]]:
         d, k = self.embed_dim, self.k
         fa, fb = a[:, d:d + k], b[:, d:d + k]
-        sep = (fa - fb).abs().topk(self.top, dim=1).values          # descending: sep[:, 0] = L
-        via = (fa + fb).neg_().topk(self.top, dim=1).values.neg_()  # ascending:  via[:, 0] = U
+        if self.top == 1:  # amax/amin: ~25x faster than topk on CPU
+            sep = (fa - fb).abs_().amax(dim=1, keepdim=True)
+            via = (fa + fb).amin(dim=1, keepdim=True)
+        else:
+            sep = (fa - fb).abs_().topk(self.top, dim=1).values          # descending: sep[:, 0] = L
+            via = (fa + fb).neg_().topk(self.top, dim=1).values.neg_()  # ascending:  via[:, 0] = U
         lower, upper = sep[:, 0], via[:, 0]
         u = upper.clamp_min(1e-6).unsqueeze(1)
         parts = [(a[:, :d] - b[:, :d]).square()] if self.embedding else []

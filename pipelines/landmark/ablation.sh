@@ -15,8 +15,8 @@ common="--val $data/val.zarr --epochs $epochs --batch-size 4 --pairs-per-mesh 20
 variants=(
   "k64          --init $paper --landmarks 64"
   "k32          --init $paper --landmarks 32"
-  "k16          --init $paper --landmarks 16"
   "k64-top1     --init $paper --landmarks 64 --landmark-top 1"
+  "k128-top1    --init $paper --landmarks 128 --landmark-top 1"
   "k64-interval --init $paper --landmarks 64 --landmark-output interval"
   "k64-no-embed --init $paper --landmarks 64 --landmark-no-embedding"
   "k64-scratch  --landmarks 64 --channels 64"
@@ -26,6 +26,7 @@ mkdir -p "$runs"
 printf '%s\n' "${variants[@]}" | xargs -P "$parallel" -I{} bash -c '
   set -euo pipefail
   read -r name args <<< "{}"
+  [ -f '"$runs"'/$name/eval.csv ] && exit 0  # done
   OMP_NUM_THREADS=1 gegnn train '"$data"'/train.zarr --run '"$runs"'/$name '"$common"' $args > '"$runs"'/$name.log 2>&1
   OMP_NUM_THREADS=1 gegnn eval '"$runs"'/$name/best.safetensors '"$data"'/val.zarr --csv '"$runs"'/$name/eval.csv >> '"$runs"'/$name.log 2>&1
   echo "$name done"'
