@@ -53,7 +53,6 @@ class GeGnnConfig:
     # Landmark guidance (this project's extension; 0 = the paper's model): K landmark distance fields
     # per component, decoded together with the embeddings by a LandmarkDecoder.
     landmarks: int = 0
-    landmark_top: int = 4                     # sorted |d_ik - d_jk| and d_ik + d_jk values the decoder reads
     landmark_embedding: bool = True           # the decoder reads the embedding difference
     landmark_euclidean: bool = True           # ... and the straight-line distance
     landmark_output: str = "ratio"            # "ratio": d = L exp(MLP); "interval": d = L + (U - L) sigmoid(MLP)
@@ -69,9 +68,8 @@ class GeGnnConfig:
             raise ValueError(f"decoder must be 'mlp' or 'euclidean', got {self.decoder!r}")
         if self.landmark_output not in ("ratio", "interval"):
             raise ValueError(f"landmark_output must be 'ratio' or 'interval', got {self.landmark_output!r}")
-        if self.landmarks < 0 or (self.landmarks and not 1 <= self.landmark_top <= self.landmarks):
-            raise ValueError(f"need landmarks >= 0 and 1 <= landmark_top <= landmarks, got "
-                             f"{self.landmarks}, {self.landmark_top}")
+        if self.landmarks < 0:
+            raise ValueError(f"landmarks must be >= 0, got {self.landmarks}")
 
     @property
     def levels(self) -> int:
@@ -109,7 +107,7 @@ class GeGnn(nn.Module):
                                   nn.Linear(c, config.embed_dim))
         if config.landmarks:
             self.distance = LandmarkDecoder(config.embed_dim, config.landmarks, config.decoder_hidden,
-                                            config.landmark_top, config.landmark_embedding,
+                                            config.landmark_embedding,
                                             config.landmark_euclidean, config.landmark_output)
         else:
             self.distance = DistanceDecoder(config.embed_dim, config.decoder_hidden, config.decoder)

@@ -13,14 +13,12 @@ paper=gegnn/weights/gegnn-classic-v1.safetensors
 common="--val $data/val.zarr --epochs $epochs --batch-size 4 --pairs-per-mesh 20000 --lr 1e-3 --warmup-epochs 0.1 --clip-grad 1.0 --resume"
 
 variants=(
-  "k64          --init $paper --landmarks 64"
-  "k32          --init $paper --landmarks 32"
-  "k64-top1     --init $paper --landmarks 64 --landmark-top 1"
-  "k128-top1    --init $paper --landmarks 128 --landmark-top 1"
-  "k64-interval --init $paper --landmarks 64 --landmark-output interval"
-  "k64-no-embed --init $paper --landmarks 64 --landmark-no-embedding"
-  "k64-scratch  --landmarks 64 --channels 64"
-  "paper-more   --init $paper"
+  "k128            --init $paper --landmarks 128 --decoder-warmup 3000"
+  "k64             --init $paper --landmarks 64 --decoder-warmup 3000"
+  "k128-no-embed   --init $paper --landmarks 128 --decoder-warmup 3000 --landmark-no-embedding"
+  "k128-interval   --init $paper --landmarks 128 --decoder-warmup 3000 --landmark-output interval"
+  "k128-no-warmup  --init $paper --landmarks 128"
+  "paper-more      --init $paper"
 )
 mkdir -p "$runs"
 printf '%s\n' "${variants[@]}" | xargs -P "$parallel" -I{} bash -c '

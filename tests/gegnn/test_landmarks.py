@@ -146,7 +146,7 @@ def test_paper_checkpoint_made_before_landmarks_still_loads():
 
 def test_checkpoint_round_trip_with_landmarks(tmp_path):
     torch.manual_seed(0)
-    model = GeGnn(small_config(landmarks=16, landmark_top=3)).eval()
+    model = GeGnn(small_config(landmarks=16, landmark_output="interval")).eval()
     model.save(tmp_path / "m.safetensors")
     again = GeGnn.from_checkpoint(tmp_path / "m.safetensors")
     assert again.config == model.config
