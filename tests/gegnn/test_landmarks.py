@@ -1,5 +1,7 @@
 """Landmark-guided GeGnn: the landmark fields, the bounds and the decoder's invariances, training and
 checkpoints."""
+import logging
+
 import gdist
 import numpy as np
 import pytest
@@ -12,6 +14,7 @@ from gegnn.checkpoint import load_checkpoint
 from gegnn.data import BatchDataset
 from gegnn.decoders import LandmarkDecoder
 from gegnn.landmarks import landmark_fields
+import gegnn.train as gtrain
 from gegnn.train import TrainConfig, lr_at, relative_error, train, train_step
 
 
@@ -173,3 +176,25 @@ def test_init_from_paper_model_keeps_its_network(tiny_store, tmp_path):
     for name, value in fresh.state_dict().items():  # the ratio decoder's last layer starts at zero
         if name.startswith("mlp.4"):
             torch.testing.assert_close(got.model_state["distance." + name], value)
+
+
+def test_decoder_warmup_trains_the_decoder_alone(tiny_store):
+    """--decoder-warmup: the decoder learns on frozen codes (its error falls), the network is untouched."""
+    torch.manual_seed(0)
+    paper = GeGnn(small_config())
+    model = GeGnn(small_config(landmarks=8))
+    model.load_state_dict({k: v for k, v in paper.state_dict().items() if not k.startswith("distance.")},
+                          strict=False)
+    dataset = BatchDataset(tiny_store, "geodesic", 0, 400, False, 5, 1 / 16, 3 / 16, 8)
+    ids = ["ellipsoid_a", "ellipsoid_b", "sphere"]
+
+    def error():
+        with torch.no_grad():
+            return np.mean([relative_error(model(b.hierarchy, b.pairs, b.fields), b.distances).mean().item()
+                            for b in (dataset[(-1, (m,))] for m in ids)])
+
+    before, network = error(), {k: v.clone() for k, v in model.state_dict().items() if not k.startswith("distance.")}
+    gtrain.warm_decoder(model, dataset, ids, 200, 3e-3, torch.device("cpu"), logging.getLogger("test"))
+    assert error() < 0.7 * before
+    for name, value in network.items():
+        torch.testing.assert_close(model.state_dict()[name], value)

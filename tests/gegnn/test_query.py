@@ -91,7 +91,11 @@ def test_clear_errors(soup, ckpt, tmp_path):
     r = runner.invoke(main, ["query", ckpt, path])
     assert r.exit_code != 0 and "--source or --pairs" in r.output
     r = runner.invoke(main, ["query", path, "--source", "0"])
-    assert r.exit_code != 0 and "--pretrained MESH" in r.output
+    assert r.exit_code != 0 and "--pretrained [NAME] MESH" in r.output
+    r = runner.invoke(main, ["query", "--pretrained", "papr", path, "--source", "0"])
+    assert r.exit_code != 0 and "no pretrained model 'papr'; shipped: landmark, paper" in r.output
+    r = runner.invoke(main, ["query", "--pretrained", str(tmp_path / "missing.obj"), "--source", "0"])
+    assert r.exit_code != 0 and "missing.obj: no such file" in r.output
     with pytest.raises(ValueError, match="two integer columns"):
         (tmp_path / "p.csv").write_text("0,1\nx,y\n")
         read_pairs(tmp_path / "p.csv")
