@@ -111,18 +111,19 @@ class LandmarkDecoder(nn.Module):
     def inputs(self, a: Tensor, b: Tensor) -> tuple[Tensor, tuple[Tensor, Tensor]]:
         d, k = self.embed_dim, self.k
         fa, fb = a[:, d:d + k], b[:, d:d + k]
-        sep = (fa - fb).abs_()
-        lower = sep.amax(dim=1)  # amax/amin/sum: topk of a few was 25x slower per query on CPU
         upper = (fa + fb).amin(dim=1)
+        sep = (fa - fb).abs_()
+        lower = sep.amax(dim=1)  # amax/amin/sums: topk of a few was 25x slower per query on CPU
         mean, rms = sep.mean(dim=1), torch.linalg.vector_norm(sep, dim=1) / k ** 0.5
         na, nb = a[:, d + k], b[:, d + k]
         u = upper.clamp_min(1e-6)
-        parts = [(a[:, :d] - b[:, :d]).square()] if self.embedding else []
         feats = [lower, mean, rms, na + nb, (na - nb).abs()]
         if self.euclidean:
             feats.append((a[:, d + k + 1:] - b[:, d + k + 1:]).norm(dim=1))
-        parts.append(torch.stack(feats, dim=1) / u.unsqueeze(1))
-        parts.append(u.log().unsqueeze(1))
+        parts = [torch.stack(feats, dim=1).div_(u.unsqueeze(1)), u.log().unsqueeze(1)]
+        if self.embedding:
+            ea, eb = a[:, :d], b[:, :d]
+            parts.insert(0, (ea - eb).square())
         return torch.cat(parts, dim=1), (lower, upper)
 
     def output(self, t: Tensor, extra: tuple[Tensor, Tensor]) -> Tensor:

@@ -7,6 +7,8 @@ from torch import Tensor
 
 __all__ = ["Embedding"]
 
+CHUNK_VALUES = 1 << 19  # code values per side of one decoded chunk
+
 
 def _bf16_is_fast(device: torch.device) -> bool:
     # bf16 matmuls are ~3x fp32 on CPUs with AVX512-BF16/AMX (measured on this project's CPU);
@@ -28,14 +30,17 @@ class Embedding:
         scale: factor from normalized units to the input's units.
         precision: ``"auto"`` (bf16 decoder where bf16 matmuls are fast, else fp32), ``"bf16"`` or
             ``"fp32"``. bf16 changes distances by ~0.3% relative (median), well below the model's error.
-        chunk: pairs decoded per batch; 8192 was fastest on CPU (large enough for the matmul kernels,
-            small enough that intermediates stay in cache).
+        chunk: pairs decoded per batch; default about 512k code values per side (8192 pairs of 64-d
+            embeddings, 2674 of a landmark model's 196-d codes): fastest on CPU, large enough for the
+            matmul kernels, small enough that intermediates stay in cache (K = 128: 0.33 s per 1M
+            queries against 0.41 s with 8192).
     """
 
     def __init__(self, features: Tensor, decoder, scale: float = 1.0, precision: str = "auto",
-                 chunk: int = 8192):
+                 chunk: int | None = None):
         self.features = features.detach()
-        self.decoder, self.scale, self.chunk = decoder, float(scale), chunk
+        self.decoder, self.scale = decoder, float(scale)
+        self.chunk = chunk or max(1024, CHUNK_VALUES // self.features.shape[1])
         if precision == "auto":
             precision = "bf16" if _bf16_is_fast(self.features.device) else "fp32"
         self.dtype = {"bf16": torch.bfloat16, "fp32": torch.float32}[precision]
