@@ -4,12 +4,14 @@ alone (no learning) at several K.
 
     python benchmarks/ablation_landmarks.py VAL_STORE RUNS_DIR
 
-Prints a markdown table (one row per variant: K, what the decoder reads, steps, CPU minutes, MRE).
+Prints a markdown table (one row per variant: K, what the decoder reads, steps, minutes of one CPU
+thread including the decoder warm-up, MRE).
 """
 from __future__ import annotations
 
 import argparse
 import csv
+from datetime import datetime
 from pathlib import Path
 
 import numpy as np
@@ -37,10 +39,18 @@ def mean_mre(rows) -> float:
     return float(np.mean([float(r["mre"]) for r in rows if r["mesh_id"] != "overall"]))
 
 
+def setup_seconds(log: Path) -> float:
+    """From the run's first log line to its 'N train / M val meshes' line: the decoder warm-up."""
+    stamps = [(datetime.strptime(line[:19], "%Y-%m-%d %H:%M:%S"), line) for line in log.read_text().splitlines()]
+    start = stamps[0][0]
+    ready = next(t for t, line in stamps if " train / " in line)
+    return (ready - start).total_seconds()
+
+
 def describe(config) -> str:
     if not config.landmarks:
         return "paper decoder"
-    reads = (["embedding"] if config.landmark_embedding else []) + [f"top-{config.landmark_top} bounds"]
+    reads = (["embedding"] if config.landmark_embedding else []) + ["landmark features"]
     reads += ["euclidean"] if config.landmark_euclidean else []
     return f"{config.landmark_output}: " + " + ".join(reads)
 
@@ -51,7 +61,7 @@ def main():
     ap.add_argument("runs")
     args = ap.parse_args()
     store = GeodesicStore(args.val_store, "geodesic")
-    lines = ["| variant | K | decoder reads | init | steps | CPU min | val MRE |",
+    lines = ["| variant | K | decoder reads | start | network steps | CPU min | val MRE |",
              "|---|---:|---|---|---:|---:|---:|"]
     paper = mean_mre(evaluate_store(GeGnn.pretrained("paper"), args.val_store))
     lines.append(f"| shipped paper model | 0 | paper decoder | — | 2,457 + phase 1 | 98 | {100 * paper:.2f}% |")
@@ -63,8 +73,10 @@ def main():
         ckpt = load_checkpoint(run / "last.safetensors")
         with open(run / "metrics.csv", newline="") as f:
             metrics = list(csv.DictReader(f))
-        minutes = sum(float(r["seconds"]) for r in metrics) / 60
-        init = "paper model" if ckpt.metadata["train_config"].get("init") else "scratch"
+        minutes = (sum(float(r["seconds"]) for r in metrics) + setup_seconds(run / "train.log")) / 60
+        tc = ckpt.metadata["train_config"]
+        init = ("paper model" if tc.get("init") else "scratch") + \
+            (f", decoder warm-up {tc['decoder_warmup']}" if tc.get("decoder_warmup") else "")
         c = ckpt.config
         lines.append(f"| {run.name} | {c.landmarks} | {describe(c)} | {init} | {int(metrics[-1]['step']):,} | "
                      f"{minutes:.0f} | {100 * mre:.2f}% |")

@@ -154,6 +154,7 @@ def main():
                     help="meshes of the picture grid (comma-separated ids)")
     ap.add_argument("--meshes", help="only these meshes (comma-separated ids; default: all)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--ablation", help="markdown table of benchmarks/ablation_landmarks.py to include")
     args = ap.parse_args()
     torch.set_num_threads(os.cpu_count() or 1)
 
@@ -215,8 +216,9 @@ def write_report(path, args, rows, times, largest, grid_ids):
         "Produced by",
         "",
         "```",
-        f"python benchmarks/bench_results.py {args.store}" + (f" --checkpoint {args.checkpoint}" if args.checkpoint
-                                                               else ""),
+        f"python benchmarks/bench_results.py {args.store}"
+        + (f" --checkpoint {args.checkpoint}" if args.checkpoint else "")
+        + (f" --ablation {args.ablation}" if args.ablation else ""),
         "```",
         "",
         f"with {ckpt} and the shipped paper model (`GeGnn.pretrained(\"paper\")`), on the validation store "
@@ -247,6 +249,11 @@ def write_report(path, args, rows, times, largest, grid_ids):
         "|---|---:|",
     ]
     lines += [f"| {name} | {t:.4g} |" for name, t in times]
+    if args.ablation:
+        lines += ["", "## Ablation of the landmark-guided model", "",
+                  "`bash pipelines/landmark/ablation.sh data/ runs/ablation` (one CPU budget: the same "
+                  "decoder warm-up and one epoch of 91 steps per variant, one thread each; all stored pairs of "
+                  "the validation meshes, mean over meshes):", "", Path(args.ablation).read_text().strip()]
     if grid_ids:
         lines += ["", "## Predicted vs exact", "",
                   "One stored source per mesh (red dot); the error panels' scale stops at 10%.", "",
