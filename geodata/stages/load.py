@@ -27,6 +27,7 @@ def load_mesh_bytes(data: bytes, suffix: str, return_map: bool = False):
     """
     if len(data) == 0:
         raise MeshError("load", "empty file")
+    data = _utf8_text(data, suffix)
     try:
         # process=False: keep the file's indices so validation sees what the file really says.
         loaded = trimesh.load(io.BytesIO(data), file_type=suffix.lstrip(".").lower(), process=False,
@@ -38,6 +39,22 @@ def load_mesh_bytes(data: bytes, suffix: str, return_map: bool = False):
     vertices = np.asarray(loaded.vertices, dtype=np.float64).reshape(-1, 3)
     faces = np.asarray(loaded.faces).reshape(-1, 3)
     return clean(vertices, faces, return_map)
+
+
+TEXT_SUFFIXES = (".obj", ".off")  # always text; PLY and STL may be binary and are passed through
+
+
+def _utf8_text(data: bytes, suffix: str) -> bytes:
+    """Text formats as UTF-8: a file that is not valid UTF-8 (a Latin-1 byte in a material or group
+    name, common in the wild) is read as Latin-1, which decodes any byte. Without this, trimesh asks
+    for the optional charset_normalizer module to guess the encoding."""
+    if suffix.lower() not in TEXT_SUFFIXES:
+        return data
+    try:
+        data.decode("utf-8")
+        return data
+    except UnicodeDecodeError:
+        return data.decode("latin-1").encode("utf-8")
 
 
 def clean(vertices: np.ndarray, faces: np.ndarray, return_map: bool = False):

@@ -61,3 +61,13 @@ def test_bad_input_raises_one_line_mesh_error(name):
         load_mesh_bytes(data, suffix)
     assert info.value.stage == "load"
     assert words in info.value.reason and "\n" not in info.value.reason and info.value.reason
+
+
+def test_latin1_text_loads_without_optional_modules():
+    """One Latin-1 byte in a material name (not UTF-8): the mesh loads, the same as its UTF-8 twin."""
+    latin1 = b"mtllib caf\xe9.mtl\nusemtl m\xe9tal\n" + CUBE_OBJ
+    utf8 = b"mtllib caf\xc3\xa9.mtl\nusemtl m\xc3\xa9tal\n" + CUBE_OBJ
+    a, b = load_mesh_bytes(latin1, ".obj"), load_mesh_bytes(utf8, ".obj")
+    assert a.n_faces == 12
+    np.testing.assert_array_equal(a.vertices, b.vertices)
+    np.testing.assert_array_equal(a.faces, b.faces)
