@@ -97,7 +97,7 @@ def main():
 
 @main.command()
 @click.argument("raw_dir", type=click.Path(exists=True))
-@click.argument("out", type=click.Path())
+@click.argument("out", type=click.Path(file_okay=False))
 @click.option("--pairs", default=600_000, show_default=True, type=click.IntRange(1),
               help="Exact geodesic pairs per mesh (random sources x all other vertices).")
 @click.option("--target-vertices", default=5000, show_default=True, type=click.IntRange(100),
@@ -129,6 +129,8 @@ def prepare(raw_dir, out, pairs, target_vertices, collapse, seed, geodesic_backe
         store.create_store(out, config.store_params())
     except store.StoreError as exc:
         raise click.ClickException(str(exc)) from None
+    except OSError as exc:  # a parent that is a file, no permission, a full disk...
+        raise click.ClickException(f"{out}: cannot create the store: {exc.strerror or exc}") from None
     tasks, n_done, n_failed = select_tasks(raw_dir, out, shard, retry_failed, include, exclude)
     log.info("prepare %s -> %s: %d to do, %d already committed, %d failed before%s", raw_dir, out, len(tasks),
              n_done, n_failed, "" if shard == (0, 1) else f" (shard {shard[0]}/{shard[1]})")

@@ -129,3 +129,12 @@ def test_a_crashing_or_hanging_mesh_fails_alone(raw, tmp_path, monkeypatch):
     assert failures["crate.glb"]["stage"] == "watertight" and "timed out" in failures["crate.glb"]["error"]
     ok = [a["source"] for a in store.list_meshes(tmp_path / "out.zarr").values() if a.get("status") == "ok"]
     assert ok == ["nested/table.obj"] and "Traceback" not in result.output
+
+
+def test_out_path_problems_are_one_line_errors(raw, tmp_path):
+    afile = tmp_path / "afile"
+    afile.write_text("not a store")
+    for out, words in [(afile, "is a file"), (afile / "sub", "cannot create the store: Not a directory")]:
+        result = CliRunner().invoke(main, ["prepare", str(raw), str(out)])
+        assert result.exit_code != 0 and "Traceback" not in result.output
+        assert words in result.output.strip().splitlines()[-1]  # the error line, after click's usage lines
