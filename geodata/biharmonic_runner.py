@@ -48,10 +48,11 @@ def process_biharmonic(task: tuple[str, str], out: str, config: BiharmonicConfig
     """Compute and commit one mesh's biharmonic pairs, or record why not in meshes/<id>/biharmonic."""
     mesh_id, source = task
     start = time.perf_counter()
-    row = {"mesh_id": mesh_id, "source": source}
+    row = {"mesh_id": mesh_id, "source": source, "warnings": []}
     path = f"meshes/{mesh_id}/biharmonic"
     try:
-        pairs, distances, seconds = run_isolated(_compute, out, mesh_id, config, timeout=config.timeout)
+        pairs, distances, seconds = run_isolated(_compute, out, mesh_id, config, timeout=config.timeout,
+                                                 warnings_out=row["warnings"])
     except MeshError as exc:
         store.write_group(out, path, {}, {"status": "failed", "stage": exc.stage, "error": exc.reason})
         return {**row, "status": "failed", "stage": exc.stage, "error": exc.reason,

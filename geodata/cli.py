@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import logging
 import sys
-import time
 from collections import defaultdict
 from functools import partial
 from pathlib import Path
@@ -16,6 +15,7 @@ from geodata import store
 from geodata.parallel import BACKENDS, parallel_map, parse_shard
 
 log = logging.getLogger("geodata")
+library_log = logging.getLogger("geodata.library")  # libraries' warnings: the log file only, once each
 
 
 class _TqdmHandler(logging.Handler):
@@ -31,6 +31,7 @@ def _setup_logging(log_file: str | None) -> None:
     log.propagate = False
     console = _TqdmHandler()
     console.setFormatter(logging.Formatter("geodata %(levelname)s %(message)s"))
+    console.addFilter(lambda record: record.name != library_log.name)
     log.addHandler(console)
     if log_file:
         Path(log_file).parent.mkdir(parents=True, exist_ok=True)
@@ -139,12 +140,16 @@ def prepare(raw_dir, out, pairs, target_vertices, collapse, seed, geodesic_backe
 
 
 def _run(fn, tasks, what, jobs, backend, scheduler) -> list[dict]:
-    rows = []
+    rows, warned = [], set()
     bar = tqdm(total=len(tasks), desc=what, unit="mesh", disable=None, dynamic_ncols=True)
     try:
         for row in parallel_map(fn, tasks, jobs, backend, scheduler):
             rows.append(row)
             bar.update()
+            for text in row.get("warnings", []):
+                if text not in warned:
+                    warned.add(text)
+                    library_log.info("library warning (first seen on %s): %s", row["source"], text)
             if row["status"] == "ok":
                 log.info("ok %s %s %.1fs", row["mesh_id"], row["source"], row["seconds"])
             else:

@@ -16,6 +16,7 @@ import select
 import signal
 import sys
 import time
+import warnings
 from typing import Any, Callable, Iterable, Iterator
 
 from geodata.mesh import MeshError, one_line
@@ -25,11 +26,14 @@ __all__ = ["BACKENDS", "run_isolated", "parallel_map", "parse_shard", "in_shard"
 BACKENDS = ("loky", "dask", "ray")
 
 
-def run_isolated(fn: Callable[..., Any], *args, timeout: float | None = None) -> Any:
+def run_isolated(fn: Callable[..., Any], *args, timeout: float | None = None,
+                 warnings_out: list[str] | None = None) -> Any:
     """fn(*args) in a forked child; MeshError when it raises one, dies, or exceeds `timeout` seconds.
 
     The child reports the stage it enters through `stage(name)` (see `current_stage`), so a crash is
-    blamed on the right stage.
+    blamed on the right stage. Python warnings raised in the child (libraries' RuntimeWarnings...)
+    never reach the console: each distinct one is appended to `warnings_out` as "[stage] Category:
+    message", for the caller to log.
     """
     if not hasattr(os, "fork"):  # no process isolation on this platform
         return fn(*args)
@@ -42,6 +46,8 @@ def run_isolated(fn: Callable[..., Any], *args, timeout: float | None = None) ->
     data, timed_out = _read_all(read_fd, timeout, pid)
     _, wait_status = os.waitpid(pid, 0)
     messages = _unpickle_all(data)
+    if warnings_out is not None:
+        warnings_out.extend(m[1] for m in messages if m[0] == "warning")
     stage = next((m[1] for m in reversed(messages) if m[0] == "stage"), "unknown")
     final = messages[-1] if messages and messages[-1][0] in ("result", "error") else None
     if final is not None and final[0] == "result":
@@ -57,18 +63,30 @@ def run_isolated(fn: Callable[..., Any], *args, timeout: float | None = None) ->
 
 
 _report_fd: int | None = None
+_stage, _warned = "unknown", set()
 
 
 def current_stage(name: str) -> None:
     """Tell the supervising process which stage runs now (no-op outside `run_isolated`)."""
+    global _stage
+    _stage = name
     if _report_fd is not None:
         os.write(_report_fd, pickle.dumps(("stage", name)))
+
+
+def _report_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    text = f"[{_stage}] {category.__name__}: {' '.join(str(message).split())[:200]}"
+    if text not in _warned:
+        _warned.add(text)
+        os.write(_report_fd, pickle.dumps(("warning", text)))
 
 
 def _child(fn, args, write_fd: int) -> None:
     global _report_fd
     _report_fd = write_fd
     faulthandler.disable()  # a crash is reported by the parent in one line, not as a dump here
+    warnings.simplefilter("default")  # each distinct warning once, through the pipe
+    warnings.showwarning = _report_warning
     code = 0
     try:
         try:

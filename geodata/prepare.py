@@ -165,9 +165,10 @@ def library_versions() -> dict:
 def process_task(task: MeshTask, out: str, config: PrepareConfig) -> dict:
     """Prepare one mesh and commit it (or record its failure). Returns a summary row; never raises MeshError."""
     start = time.perf_counter()
-    row = {"mesh_id": task.mesh_id, "source": task.source}
+    row = {"mesh_id": task.mesh_id, "source": task.source, "warnings": []}
     try:
-        arrays, computed = run_isolated(_compute, task, config, timeout=config.timeout)
+        arrays, computed = run_isolated(_compute, task, config, timeout=config.timeout,
+                                        warnings_out=row["warnings"])
     except MeshError as exc:
         store.record_failure(out, task.mesh_id, task.source, exc.stage, exc.reason)
         store.remove_mesh(out, task.mesh_id)

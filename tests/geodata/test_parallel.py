@@ -81,3 +81,33 @@ def test_shards_partition_the_work():
     for bad in ("5/5", "1", "-1/3", "a/b"):
         with pytest.raises(ValueError):
             parse_shard(bad)
+
+
+def _warn_twice():
+    import warnings
+
+    current_stage("remesh")
+    for _ in range(3):
+        np.float64(1.0) / np.float64(0.0)  # numpy's RuntimeWarning: divide by zero
+    warnings.warn("a library's own words", UserWarning)
+    return 7
+
+
+def test_library_warnings_come_back_once_and_not_on_stderr(capfd):
+    seen = []
+    assert run_isolated(_warn_twice, warnings_out=seen) == 7
+    assert seen == ["[remesh] RuntimeWarning: divide by zero encountered in scalar divide",
+                    "[remesh] UserWarning: a library's own words"]
+    assert "Warning" not in capfd.readouterr().err
+
+
+def test_library_warnings_go_to_the_log_file_only(tmp_path, capfd):
+    from geodata import cli
+
+    cli._setup_logging(str(tmp_path / "run.log"))
+    cli.library_log.info("library warning (first seen on a.obj): [remesh] RuntimeWarning: x")
+    cli.log.info("ok a a.obj 1.0s")
+    text = (tmp_path / "run.log").read_text()
+    assert "RuntimeWarning: x" in text and "ok a a.obj" in text
+    err = capfd.readouterr().err
+    assert "ok a a.obj" in err and "RuntimeWarning" not in err
