@@ -110,17 +110,20 @@ def main():
               help="Exact geodesic code: tvb-gdist (fast) or libigl (reference); both give the same distances.")
 @click.option("--timeout", default=1800.0, show_default=True, help="Seconds one mesh may take before it counts as failed.")
 @click.option("--retry-failed", is_flag=True, help="Try again the meshes recorded under failed/.")
+@click.option("--strict", is_flag=True, help="Exit with status 1 when any mesh of this run failed (default: 0, "
+                                             "a batch that recorded its failures did its job).")
 @_list_options
 @_scale_options
 def prepare(raw_dir, out, pairs, target_vertices, collapse, seed, geodesic_backend, timeout, retry_failed,
-            include, exclude, jobs, backend, scheduler, shard, log_file):
+            strict, include, exclude, jobs, backend, scheduler, shard, log_file):
     """Prepare every mesh file under RAW_DIR (OBJ/OFF/PLY/STL/GLB, searched recursively) into store OUT.
 
     Stages: load, watertight (manifold3d), isotropic remesh (pymeshlab), QEM edge collapse,
     normalize to [-1,1], exact geodesic pairs. A mesh counts once its group is committed; a rerun
     skips committed meshes and redoes the rest, so a killed run loses nothing. Bad input is recorded
-    under failed/ with the stage and reason and the batch goes on. Several RAW_DIRs may be prepared
-    into one store (same options): ids come from file contents.
+    under failed/ with the stage and reason and the batch goes on; the exit status is still 0 (use
+    --strict for 1). Several RAW_DIRs may be prepared into one store (same options): ids come from
+    file contents.
     """
     from geodata.prepare import PrepareConfig, process_task, select_tasks
 
@@ -137,6 +140,10 @@ def prepare(raw_dir, out, pairs, target_vertices, collapse, seed, geodesic_backe
              n_done, n_failed, "" if shard == (0, 1) else f" (shard {shard[0]}/{shard[1]})")
     rows = _run(partial(process_task, out=out, config=config), tasks, "prepare", jobs, backend, scheduler)
     _summary(rows, n_done, n_failed)
+    failed = sum(r["status"] != "ok" for r in rows)
+    if strict and failed:
+        raise click.ClickException(f"--strict: {failed} of {len(rows)} meshes failed (listed above and in "
+                                   f"{out}/failed)")
 
 
 def _run(fn, tasks, what, jobs, backend, scheduler) -> list[dict]:

@@ -138,3 +138,13 @@ def test_out_path_problems_are_one_line_errors(raw, tmp_path):
         result = CliRunner().invoke(main, ["prepare", str(raw), str(out)])
         assert result.exit_code != 0 and "Traceback" not in result.output
         assert words in result.output.strip().splitlines()[-1]  # the error line, after click's usage lines
+
+
+def test_failures_exit_0_unless_strict(tmp_path):
+    raw = tmp_path / "raw"
+    raw.mkdir()
+    (raw / "empty.obj").write_bytes(b"")
+    lenient = CliRunner().invoke(main, ["prepare", str(raw), str(tmp_path / "a.zarr")])
+    assert lenient.exit_code == 0 and "0 ok, 1 failed" in lenient.output
+    strict = CliRunner().invoke(main, ["prepare", str(raw), str(tmp_path / "b.zarr"), "--strict"])
+    assert strict.exit_code == 1 and "--strict: 1 of 1 meshes failed" in strict.output
