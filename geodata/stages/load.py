@@ -9,7 +9,7 @@ import trimesh
 
 from geodata.mesh import Mesh, MeshError, one_line
 
-__all__ = ["MESH_SUFFIXES", "load_mesh_bytes", "load_mesh_file", "clean"]
+__all__ = ["MESH_SUFFIXES", "load_mesh_bytes", "load_mesh_file", "clean", "explain"]
 
 MESH_SUFFIXES = (".obj", ".off", ".ply", ".stl", ".glb")
 
@@ -33,11 +33,17 @@ def load_mesh_bytes(data: bytes, suffix: str, return_map: bool = False):
         loaded = trimesh.load(io.BytesIO(data), file_type=suffix.lstrip(".").lower(), process=False,
                               force="mesh")
     except Exception as exc:  # trimesh raises many types for garbage input
-        raise MeshError("load", f"unreadable as {suffix.lstrip('.').upper()}: {one_line(exc, with_type=False)}") from None
+        reason = explain(data, suffix) or \
+            f"unreadable as {suffix.lstrip('.').upper()}: {one_line(exc, with_type=False)}"
+        raise MeshError("load", reason) from None
     if not isinstance(loaded, trimesh.Trimesh):
         raise MeshError("load", "file holds no triangle mesh")
     vertices = np.asarray(loaded.vertices, dtype=np.float64).reshape(-1, 3)
     faces = np.asarray(loaded.faces).reshape(-1, 3)
+    if len(faces) == 0:  # a truncated file, or a point cloud (trimesh drops an OBJ's lone vertices)
+        n = len(vertices) or _file_vertex_count(data, suffix)
+        raise MeshError("load", explain(data, suffix) or (f"point cloud: {n} vertices and no faces" if n
+                                                          else "no vertices and no faces"))
     return clean(vertices, faces, return_map)
 
 
@@ -55,6 +61,97 @@ def _utf8_text(data: bytes, suffix: str) -> bytes:
         return data
     except UnicodeDecodeError:
         return data.decode("latin-1").encode("utf-8")
+
+
+def explain(data: bytes, suffix: str) -> str | None:
+    """Why a file the parser refused is broken, in the file's own terms (its line numbers, its index
+    base, its header's counts); None when no structural defect is found."""
+    check = {".obj": _explain_obj, ".off": _explain_off, ".ply": _explain_ply}.get(suffix.lower())
+    try:
+        return check(data) if check else None
+    except (ValueError, IndexError, UnicodeDecodeError):
+        return None
+
+
+def _obj_vertex_count(data: bytes) -> int:
+    return sum(line.startswith((b"v ", b"v\t")) for line in data.splitlines())
+
+
+def _file_vertex_count(data: bytes, suffix: str) -> int:
+    """Vertices the file holds (OBJ) or declares (PLY header); 0 when unknown."""
+    if suffix.lower() == ".obj":
+        return _obj_vertex_count(data)
+    if suffix.lower() == ".ply":
+        for line in data[:data.find(b"end_header")].splitlines():
+            words = line.split()
+            if words[:2] == [b"element", b"vertex"]:
+                return int(words[2])
+    return 0
+
+
+def _explain_obj(data: bytes) -> str | None:
+    lines = data.decode("latin-1").splitlines()
+    n = _obj_vertex_count(data)
+    seen = 0
+    for number, line in enumerate(lines, 1):
+        if line.startswith(("v ", "v\t")):
+            seen += 1
+        elif line.startswith(("f ", "f\t")):
+            for token in line.split()[1:]:
+                index = int(token.split("/")[0])
+                resolved = seen + index + 1 if index < 0 else index
+                if not 1 <= resolved <= n:
+                    return f"line {number}: face refers to vertex {index}; the file has {n} vertices " \
+                           f"(OBJ counts from 1)"
+    return None
+
+
+def _data_lines(lines: list[str]) -> list[str]:
+    return [line for line in lines if line.strip() and not line.lstrip().startswith(("#", "comment"))]
+
+
+def _explain_off(data: bytes) -> str | None:
+    lines = _data_lines(data.decode("latin-1").splitlines())
+    tokens = lines[0].split()
+    if not tokens[0].endswith("OFF"):
+        return "not an OFF file: no OFF header on the first line"
+    counts, rest = (tokens[1:4], lines[1:]) if len(tokens) > 1 else (lines[1].split()[:3], lines[2:])
+    nv, nf = int(counts[0]), int(counts[1])
+    if len(rest) < nv + nf:
+        return f"OFF header declares {nv} vertices and {nf} faces but the file holds {len(rest)} data lines"
+    return None
+
+
+PLY_SIZES = {"char": 1, "uchar": 1, "int8": 1, "uint8": 1, "short": 2, "ushort": 2, "int16": 2,
+             "uint16": 2, "int": 4, "uint": 4, "int32": 4, "uint32": 4, "float": 4, "float32": 4,
+             "double": 8, "float64": 8}
+
+
+def _explain_ply(data: bytes) -> str | None:
+    end = data.find(b"end_header")
+    if not data.startswith(b"ply") or end < 0:
+        return "PLY header truncated (no end_header line)" if data.startswith(b"ply") else \
+            "not a PLY file: it does not start with 'ply'"
+    header = data[:end].decode("latin-1").splitlines()
+    body = data[data.index(b"\n", end) + 1:] if b"\n" in data[end:] else b""
+    fmt = next(line.split()[1] for line in header if line.startswith("format"))
+    elements, scalar_bytes = [], {}
+    for line in header:
+        words = line.split()
+        if words and words[0] == "element":
+            elements.append((words[1], int(words[2])))
+        elif words and words[0] == "property" and words[1] != "list":
+            scalar_bytes[elements[-1][0]] = scalar_bytes.get(elements[-1][0], 0) + PLY_SIZES[words[1]]
+    counts = dict(elements)
+    nv, nf = counts.get("vertex", 0), counts.get("face", 0)
+    if fmt == "ascii":
+        held = len(_data_lines(body.decode("latin-1").splitlines()))
+        if held < sum(counts.values()):
+            return f"PLY header declares {nv} vertices and {nf} faces but the file holds {held} data lines"
+    elif elements and elements[0][0] == "vertex" and nv * scalar_bytes.get("vertex", 0) > len(body):
+        return f"PLY header declares {nv} vertices ({nv * scalar_bytes['vertex']} bytes) but only " \
+               f"{len(body)} bytes follow the header"
+    return None
 
 
 def clean(vertices: np.ndarray, faces: np.ndarray, return_map: bool = False):

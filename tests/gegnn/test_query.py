@@ -87,7 +87,7 @@ def test_clear_errors(soup, ckpt, tmp_path):
     bad = tmp_path / "bad.obj"
     bad.write_text("v 0 0 0\nv 1 0 0\nf 1 2 3\n")
     r = runner.invoke(main, ["query", ckpt, str(bad), "--source", "0"])
-    assert r.exit_code != 0 and "bad.obj: load: unreadable as OBJ" in r.output
+    assert r.exit_code != 0 and "bad.obj: load: line 3: face refers to vertex 3; the file has 2 vertices" in r.output
     r = runner.invoke(main, ["query", ckpt, path])
     assert r.exit_code != 0 and "--source or --pairs" in r.output
     r = runner.invoke(main, ["query", path, "--source", "0"])

@@ -44,7 +44,7 @@ def test_duplicate_vertices_are_merged():
 
 BAD_INPUTS = {
     "empty": (b"", ".obj", "empty file"),
-    "garbage": (bytes(range(256)) * 40, ".ply", "unreadable"),
+    "garbage": (bytes(range(256)) * 40, ".ply", "not a PLY file"),
     "not a mesh": (b"\x89PNG\r\n\x1a\n" + b"\0" * 200, ".stl", ""),
     "nan": (b"v 0 0 0\nv 1 0 nan\nv 0 1 0\nf 1 2 3\n", ".obj", "NaN/inf"),
     "inf": (b"OFF\n3 1 0\n0 0 0\n1 0 inf\n0 1 0\n3 0 1 2\n", ".off", "NaN/inf"),
@@ -71,3 +71,36 @@ def test_latin1_text_loads_without_optional_modules():
     assert a.n_faces == 12
     np.testing.assert_array_equal(a.vertices, b.vertices)
     np.testing.assert_array_equal(a.faces, b.faces)
+
+
+PLY_HEAD = (b"ply\nformat {fmt} 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+            b"element face 1\nproperty list uchar int vertex_indices\nend_header\n")
+REASONS = {  # broken files and the reason a user can act on, in the file's own terms
+    "OBJ index past the end, 1-based with its line":
+        (b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 2 12\n", ".obj",
+         "line 6: face refers to vertex 12; the file has 4 vertices (OBJ counts from 1)"),
+    "OBJ negative index before the first vertex":
+        (b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf -1 -2 -4\n", ".obj", "line 4: face refers to vertex -4; the file has 3"),
+    "OFF header absurd": (b"OFF\n353535235358 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n", ".off",
+                          "OFF header declares 353535235358 vertices and 1 faces but the file holds 4 data lines"),
+    "PLY header truncated": (b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty flo", ".ply",
+                             "PLY header truncated (no end_header line)"),
+    "binary PLY body short": (PLY_HEAD.replace(b"{fmt}", b"binary_little_endian") + b"\0\0\0", ".ply",
+                              "PLY header declares 3 vertices (36 bytes) but only 3 bytes follow the header"),
+    "ASCII PLY body short": (PLY_HEAD.replace(b"{fmt}", b"ascii") + b"0 0 0\n1 0 0\n", ".ply",
+                             "PLY header declares 3 vertices and 1 faces but the file holds 2 data lines"),
+    "OBJ point cloud": (b"v 0 0 0\nv 1 0 0\nv 0 1 0\n", ".obj", "point cloud: 3 vertices and no faces"),
+}
+
+
+@pytest.mark.parametrize("name", REASONS)
+def test_reasons_in_the_files_own_terms(name):
+    data, suffix, reason = REASONS[name]
+    with pytest.raises(MeshError) as info:
+        load_mesh_bytes(data, suffix)
+    assert reason in info.value.reason
+
+
+def test_negative_obj_indices_are_valid():
+    quad = b"v 0 0 0\nv 1 0 0\nv 1 1 0\nf -3 -2 -1\nv 0 1 0\nf -4 -2 -1\n"
+    assert load_mesh_bytes(quad, ".obj").n_faces == 2
