@@ -159,6 +159,8 @@ def _run(fn, tasks, what, jobs, backend, scheduler) -> list[dict]:
                     library_log.info("library warning (first seen on %s): %s", row["source"], text)
             if row["status"] == "ok":
                 log.info("ok %s %s %.1fs", row["mesh_id"], row["source"], row["seconds"])
+                for note in row.get("notes", []):
+                    log.warning("note %s %s: %s", row["mesh_id"], row["source"], note)
             else:
                 log.warning("FAILED %s %s [%s] %s", row["mesh_id"], row["source"], row["stage"], row["error"])
     except RuntimeError as exc:
@@ -293,6 +295,11 @@ def info(out):
                    f"geodesic pairs: {npairs.sum():,} in all")
         click.echo(_stage_seconds([a.get("timings", {}) for a in ok.values()]))
     click.echo(f"size on disk: {_du(out) / 2**20:.1f} MiB")
+    noted = {a.get("source"): a["warnings"] for a in ok.values() if a.get("warnings")}
+    if noted:
+        click.echo("ok, with warnings:")
+        for source, notes in sorted(noted.items()):
+            click.echo(f"  {source}  " + "; ".join(notes))
     if incomplete:
         click.echo("incomplete (redone by the next run): " + ", ".join(incomplete))
     if failures:

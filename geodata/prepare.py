@@ -123,11 +123,29 @@ def prepare_geometry(mesh: Mesh, config: PrepareConfig, timings: dict | None = N
     return run_stage(timings, "normalize", normalize, mesh)
 
 
+FLAT = 1e-6  # thickness / extent below which an input is flat
+
+
+def input_notes(mesh: Mesh) -> list[str]:
+    """What the pipeline will do to this input that its author may not expect (kept in the mesh's
+    attrs as "warnings" and shown by `geodata info`)."""
+    centered = mesh.vertices - mesh.vertices.mean(axis=0)
+    extents = np.linalg.svd(centered, compute_uv=False) if len(centered) > 1 else np.zeros(1)
+    if extents[0] > 0 and (len(extents) < 3 or extents[-1] <= FLAT * extents[0]):
+        return [f"flat input thickened: all {mesh.n_vertices} vertices lie in one plane "
+                f"({mesh.n_faces} faces); the watertight stage made a thin closed slab of it"]
+    return []
+
+
 def prepare_mesh(data: bytes, suffix: str, config: PrepareConfig, rng: np.random.Generator,
-                 timings: dict | None = None) -> tuple[Mesh, np.ndarray, np.ndarray, np.ndarray]:
-    """All stages on one file's bytes: the normalized mesh, its geodesic pairs, distances, skipped sources."""
+                 timings: dict | None = None, notes: list | None = None
+                 ) -> tuple[Mesh, np.ndarray, np.ndarray, np.ndarray]:
+    """All stages on one file's bytes: the normalized mesh, its geodesic pairs, distances, skipped
+    sources; ``notes`` gets :func:`input_notes` of the loaded input."""
     timings = {} if timings is None else timings
     mesh = run_stage(timings, "load", load_mesh_bytes, data, suffix, check=False)
+    if notes is not None:
+        notes.extend(input_notes(mesh))
     mesh = prepare_geometry(mesh, config, timings)
     pairs, distances, skipped = run_stage(timings, "geodesic", exact_geodesic_pairs, mesh, config.pairs, rng,
                                           config.geodesic_backend, check=False)
@@ -139,8 +157,9 @@ def _compute(task: MeshTask, config: PrepareConfig) -> tuple[dict, dict]:
     current_stage("load")
     data = Path(task.path).read_bytes()
     timings: dict = {}
+    notes: list = []
     mesh, pairs, distances, skipped = prepare_mesh(data, Path(task.path).suffix, config,
-                                                   mesh_rng(config.seed, task.mesh_id), timings)
+                                                   mesh_rng(config.seed, task.mesh_id), timings, notes)
     arrays = {
         "vertices": mesh.vertices.astype(np.float32),
         "faces": mesh.faces.astype(np.int32),
@@ -149,7 +168,7 @@ def _compute(task: MeshTask, config: PrepareConfig) -> tuple[dict, dict]:
         "geodesic/pairs": pairs,
         "geodesic/distances": distances,
     }
-    return arrays, {"timings": timings, "skipped_sources": skipped.tolist()}
+    return arrays, {"timings": timings, "skipped_sources": skipped.tolist(), "warnings": notes}
 
 
 def library_versions() -> dict:
@@ -181,6 +200,7 @@ def process_task(task: MeshTask, out: str, config: PrepareConfig) -> dict:
     store.commit(out, f"meshes/{task.mesh_id}")
     store.clear_failure(out, task.mesh_id)
     return {**row, "status": "ok", "timings": computed["timings"], "n_vertices": attrs["n_vertices"],
+            "notes": computed["warnings"],
             "seconds": time.perf_counter() - start}
 
 

@@ -148,3 +148,28 @@ def test_failures_exit_0_unless_strict(tmp_path):
     assert lenient.exit_code == 0 and "0 ok, 1 failed" in lenient.output
     strict = CliRunner().invoke(main, ["prepare", str(raw), str(tmp_path / "b.zarr"), "--strict"])
     assert strict.exit_code == 1 and "--strict: 1 of 1 meshes failed" in strict.output
+
+
+def test_flat_input_is_kept_with_a_warning_in_attrs_and_info(tmp_path):
+    raw = tmp_path / "raw"
+    raw.mkdir()
+    (raw / "triangle.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    out = tmp_path / "out.zarr"
+    result = CliRunner().invoke(main, ["prepare", str(raw), str(out), "--pairs", "2000", "--target-vertices", "600"])
+    assert result.exit_code == 0 and "1 ok, 0 failed" in result.output, result.output
+    (attrs,) = store.list_meshes(out).values()
+    assert attrs["status"] == "ok"
+    assert attrs["warnings"] == ["flat input thickened: all 3 vertices lie in one plane (1 faces); the "
+                                 "watertight stage made a thin closed slab of it"]
+    assert "note" in result.output and "flat input thickened" in result.output
+    info = CliRunner().invoke(main, ["info", str(out)])
+    assert "ok, with warnings:" in info.output and "triangle.obj  flat input thickened" in info.output
+
+
+def test_input_notes_only_for_flat_input():
+    from geodata.prepare import input_notes
+    from geodata.stages.load import load_mesh_bytes
+
+    assert input_notes(load_mesh_bytes(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 2 4\n", ".obj")) == []
+    square = b"v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3\nf 1 3 4\n"
+    assert input_notes(load_mesh_bytes(square, ".obj"))[0].startswith("flat input thickened: all 4 vertices")
