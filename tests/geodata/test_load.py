@@ -104,3 +104,17 @@ def test_reasons_in_the_files_own_terms(name):
 def test_negative_obj_indices_are_valid():
     quad = b"v 0 0 0\nv 1 0 0\nv 1 1 0\nf -3 -2 -1\nv 0 1 0\nf -4 -2 -1\n"
     assert load_mesh_bytes(quad, ".obj").n_faces == 2
+
+
+def test_obj_with_texture_and_normal_seams_keeps_the_files_vertex_numbering(tmp_path):
+    """vt/vn differ per face corner: the loader must not split vertices, so vertex k is the k-th v line."""
+    from geodata.stages.load import load_mesh_file
+
+    mesh = load_mesh_bytes(CUBE_OBJ, ".obj")
+    corner = ["{0}/{1}/1".format(v + 1, 1 + k % 4) for k, v in enumerate(mesh.faces.ravel())]
+    text = "".join(f"v {x} {y} {z}\n" for x, y, z in mesh.vertices) + "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nvn 0 0 1\n"
+    text += "".join(f"f {' '.join(corner[3 * i:3 * i + 3])}\n" for i in range(mesh.n_faces))
+    (tmp_path / "seams.obj").write_text(text)
+    loaded, to_mesh = load_mesh_file(tmp_path / "seams.obj")
+    assert len(to_mesh) == 8  # one entry per v line of the file (trimesh split them into 21 by default)
+    np.testing.assert_array_equal(loaded.vertices[to_mesh], mesh.vertices)
