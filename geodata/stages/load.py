@@ -8,6 +8,7 @@ import numpy as np
 import trimesh
 
 from geodata.mesh import Mesh, MeshError, one_line
+from geodata.stages.polygons import PolygonError, triangulate_obj_text, triangulate_off_text
 
 __all__ = ["MESH_SUFFIXES", "load_mesh_bytes", "load_mesh_file", "clean", "explain"]
 
@@ -28,6 +29,10 @@ def load_mesh_bytes(data: bytes, suffix: str, return_map: bool = False):
     if len(data) == 0:
         raise MeshError("load", "empty file")
     data = _utf8_text(data, suffix)
+    try:
+        data = _triangulated(data, suffix)
+    except PolygonError as exc:
+        raise MeshError("load", str(exc)) from None
     try:
         # process=False: keep the file's indices so validation sees what the file really says;
         # maintain_order: an OBJ's vertices are not split at texture or normal seams, so vertex k of
@@ -50,6 +55,7 @@ def load_mesh_bytes(data: bytes, suffix: str, return_map: bool = False):
 
 
 TEXT_SUFFIXES = (".obj", ".off")  # always text; PLY and STL may be binary and are passed through
+# PLY polygons are still fanned by trimesh (ASCII and binary bodies would need a parser of our own).
 
 
 def _utf8_text(data: bytes, suffix: str) -> bytes:
@@ -63,6 +69,19 @@ def _utf8_text(data: bytes, suffix: str) -> bytes:
         return data
     except UnicodeDecodeError:
         return data.decode("latin-1").encode("utf-8")
+
+
+def _triangulated(data: bytes, suffix: str) -> bytes:
+    """OBJ/OFF polygon faces ear-clipped in their plane (trimesh would fan them: wrong when concave)."""
+    triangulate = {".obj": triangulate_obj_text, ".off": triangulate_off_text}.get(suffix.lower())
+    if triangulate is None:
+        return data
+    try:
+        return triangulate(data.decode("utf-8")).encode("utf-8")
+    except PolygonError:
+        raise
+    except (ValueError, IndexError):
+        return data  # malformed: the parser and `explain` say why
 
 
 def explain(data: bytes, suffix: str) -> str | None:

@@ -118,3 +118,45 @@ def test_obj_with_texture_and_normal_seams_keeps_the_files_vertex_numbering(tmp_
     loaded, to_mesh = load_mesh_file(tmp_path / "seams.obj")
     assert len(to_mesh) == 8  # one entry per v line of the file (trimesh split them into 21 by default)
     np.testing.assert_array_equal(loaded.vertices[to_mesh], mesh.vertices)
+
+
+def ring_obj(n=24, r_in=0.5) -> tuple[bytes, float]:
+    """A flat annulus as ONE concave OBJ face: outer ring, a bridge edge, the inner ring backwards."""
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    outer = np.stack([np.cos(t), np.sin(t), np.zeros(n)], 1)
+    text = "".join(f"v {x} {y} {z}\n" for x, y, z in np.concatenate([outer, r_in * outer]))
+    corners = list(range(1, n + 1)) + [1, n + 1] + list(range(2 * n, n + 1, -1)) + [n + 1]
+    area = 0.5 * n * np.sin(2 * np.pi / n) * (1 - r_in ** 2)
+    return (text + "f " + " ".join(map(str, corners)) + "\n").encode(), area
+
+
+def mesh_area(mesh) -> float:
+    v, f = mesh.vertices, mesh.faces
+    return 0.5 * np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1).sum()
+
+
+def test_concave_ring_polygon_keeps_its_area():
+    data, area = ring_obj()
+    mesh = load_mesh_bytes(data, ".obj")
+    assert abs(mesh_area(mesh) - area) < 0.01 * area  # a fan from the first corner fills the hole (4/3 x)
+    assert mesh.n_vertices == 48
+
+
+def test_quads_and_ngons_as_the_same_surface_as_triangles():
+    """The cube as quads and two 5-gons sharing a midpoint of an edge (OBJ), and as OFF quads."""
+    quads = [(1, 4, 3, 2), (5, 6, 7, 8), (1, 2, 6, 5), (2, 3, 7, 6), (3, 4, 8, 7), (4, 1, 5, 8)]
+    text = CUBE_OBJ.decode().split("f ")[0] + "v 0.5 0 0\n"
+    text += "".join("f " + " ".join(map(str, q)) + "\n" for q in quads[3:] + [quads[1]])
+    text += "f 1 4 3 2 9\nf 9 2 6 5 1\n"
+    mesh = load_mesh_bytes(text.encode(), ".obj")
+    assert closed_manifold_problem(mesh) is None and abs(mesh_area(mesh) - 6) < 1e-9
+    off = "OFF\n8 6 0\n" + "".join(line[2:] + "\n" for line in CUBE_OBJ.decode().splitlines() if line.startswith("v "))
+    off += "".join("4 " + " ".join(str(i - 1) for i in q) + "\n" for q in quads)
+    mesh = load_mesh_bytes(off.encode(), ".off")
+    assert closed_manifold_problem(mesh) is None and mesh.n_faces == 12
+
+
+def test_self_intersecting_polygon_is_a_failure_naming_its_line():
+    bowtie = b"v 0 0 0\nv 1 1 0\nv 1 0 0\nv 0 1 0\nv 2 2 0\nf 1 2 3\nf 1 2 3 4\n"
+    with pytest.raises(MeshError, match="line 7: polygon of 4 corners cannot be triangulated faithfully"):
+        load_mesh_bytes(bowtie, ".obj")
