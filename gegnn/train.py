@@ -27,6 +27,7 @@ __all__ = ["TrainConfig", "train", "relative_error", "evaluate_store", "lr_at"]
 METRICS = ["epoch", "step", "lr", "train_mre", "val_mre", "seconds"]
 METRIC_EPS = 1e-3  # offset of the relative error's denominator, in normalized units
 RESUME_KEEPS = ("epochs", "device", "workers")  # options a resumed run takes from the command line
+WARMUP_LR = 1e-3  # decoder warm-up: a small MLP on fixed codes (the network's --lr is usually lower)
 
 
 @dataclass(frozen=True)
@@ -289,7 +290,8 @@ def train(cfg: TrainConfig, model_config: GeGnnConfig | None = None) -> list[dic
                                          model.config.landmarks)
                             for path in (cfg.store, cfg.val_store or cfg.store))
     if cfg.decoder_warmup and start_epoch == 0 and ctx.main:
-        warm_decoder(model, dataset, train_ids, cfg.decoder_warmup, cfg.lr, device, log)
+        warm_decoder(model, dataset, train_ids, cfg.decoder_warmup, WARMUP_LR, device, log)
+        log.info(f"after the decoder warm-up: val_mre {validate(model, val_dataset, val_ids, device, Dist()):.4f}")
     # DDP broadcasts rank 0's weights (its warmed decoder included) to every rank here.
     net = torch.nn.parallel.DistributedDataParallel(model) if ctx.world > 1 else model
     sampler = EpochSampler(train_ids, cfg.seed, cfg.batch_size, ctx.rank, ctx.world)

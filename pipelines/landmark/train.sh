@@ -8,8 +8,8 @@ data=${1:?usage: train.sh DATA_DIR RUNS_DIR}
 runs=${2:?usage: train.sh DATA_DIR RUNS_DIR}
 
 gegnn train "$data/train.zarr" --val "$data/val.zarr" --run "$runs/lm128" \
-    --init gegnn/weights/gegnn-classic-v1.safetensors --landmarks 128 --decoder-warmup 3000 \
-    --epochs 12 --batch-size 4 --pairs-per-mesh 20000 --lr 1e-3 --warmup-epochs 0.1 --clip-grad 1.0 --resume
+    --init gegnn/weights/gegnn-classic-v1.safetensors --landmarks 128 --decoder-warmup 4000 \
+    --epochs 8 --batch-size 4 --pairs-per-mesh 20000 --lr 3e-4 --warmup-epochs 0.1 --clip-grad 1.0 --resume
 
 gegnn export "$runs/lm128/best.safetensors" gegnn/weights/gegnn-landmark-v1.safetensors --dtype fp16
 bash pipelines/landmark/ablation.sh "$data" "$runs/ablation"
