@@ -211,35 +211,50 @@ def query(files, pretrained, source, pairs_csv, output, exact, prepare, device, 
             click.echo("\n".join(lines))
         return
 
-    field = emb.field(src)
+    from .query import resolution_note, source_part
+
     name = Path(mesh_path).name
+    note = None if prepare else resolution_note(len(qm.mesh.vertices))
+    if note:
+        click.echo(f"{name}: note: {note}")
+    on, n_parts = source_part(qm.mesh, src)
+    # Other parts than the source's have no geodesic distance from it: NaN (grey in pictures).
+    field = np.where(on, emb.field(src), np.nan)
     click.echo(f"{name}: {len(qm.mesh.vertices)} vertices; distance from {source}: "
-               f"min {field.min():.4g} max {field.max():.4g}")
+               f"min {np.nanmin(field):.4g} max {np.nanmax(field):.4g}")
+    if n_parts > 1:
+        click.echo(f"{name}: {n_parts} separate parts; source {source} is on a part of {int(on.sum())} vertices; "
+                   "the other parts have no geodesic distance from it (NaN in .npy, grey in pictures, "
+                   "left out of the error)")
     title = f"{name}, source {source}"
     if exact_d is not None:
         from .query import relative_errors
+        exact_d = np.where(on, exact_d, np.nan)
         err = relative_errors(field, exact_d, qm.scale, src)
         mre = float(np.nanmean(err))
         click.echo(f"mean relative error vs exact: {100 * mre:.2f}% (median {100 * np.nanmedian(err):.2f}%, "
-                   f"max {100 * np.nanmax(err):.1f}%)")
+                   f"max {100 * np.nanmax(err):.1f}%)" + (" on the source's part" if n_parts > 1 else ""))
         title += f": MRE {100 * mre:.2f}%"
+    top = float(np.nanmax(exact_d if exact_d is not None else field))
     if suffix == ".npy":
         np.save(output, qm.to_file(field))
     elif suffix == ".ply":
         import matplotlib
         import trimesh
 
-        colors = (matplotlib.colormaps["viridis"](field / max(field.max(), 1e-30)) * 255).astype(np.uint8)
-        trimesh.Trimesh(qm.mesh.vertices, qm.mesh.faces, vertex_colors=colors, process=False).export(output)
+        from .render import UNREACHABLE
+        colors = matplotlib.colormaps["viridis"](np.nan_to_num(field / max(top, 1e-30)))
+        colors[~on] = UNREACHABLE
+        trimesh.Trimesh(qm.mesh.vertices, qm.mesh.faces, vertex_colors=(colors * 255).astype(np.uint8),
+                        process=False).export(output)
     elif suffix == ".png":
         from .render import Panel, Row, save_panels
 
-        top = float(np.nanmax(exact_d)) if exact_d is not None else float(field.max())
         panels = [Panel(field, "predicted", vmin=0, vmax=top)]
         if exact_d is not None:
-            panels += [Panel(np.nan_to_num(exact_d, nan=top), "exact", vmin=0, vmax=top),
-                       Panel(np.nan_to_num(err, nan=0.0), "relative error", "magma", "|pred - exact| / exact",
-                             0, 0.1, isolines=0)]
+            panels += [Panel(exact_d, "exact", vmin=0, vmax=top),
+                       Panel(np.where(np.isnan(err) & on, 0.0, err), "relative error", "magma",
+                             "|pred - exact| / exact", 0, 0.1, isolines=0)]
         save_panels(output, [Row(qm.mesh.vertices, qm.mesh.faces, src, panels)], suptitle=title)
     if output:
         click.echo(f"written {output}")

@@ -13,11 +13,12 @@ from pathlib import Path
 
 import numpy as np
 
-from geodata.mesh import Mesh, MeshError, edge_face_counts
+from geodata.mesh import Mesh, MeshError, edge_face_counts, vertex_components
 
 from .train import METRIC_EPS
 
-__all__ = ["QueryMesh", "load_query_mesh", "exact_field", "relative_errors", "read_pairs"]
+__all__ = ["QueryMesh", "load_query_mesh", "exact_field", "relative_errors", "read_pairs", "source_part",
+           "resolution_note"]
 
 
 
@@ -86,6 +87,25 @@ def exact_field(mesh: Mesh, source: int) -> np.ndarray:
                                  "manifold mesh; --prepare makes one)")
     d = run_isolated(exact_geodesic_distances, mesh, source)
     return np.where(np.isfinite(d), d, np.nan)
+
+
+TRAINED_VERTICES = (1000, 30000)  # outside this range a mesh is far from the training meshes' ~5k
+
+
+def resolution_note(n_vertices: int) -> str | None:
+    """A word for meshes much coarser or finer than the ~5k-vertex meshes the models were trained on."""
+    low, high = TRAINED_VERTICES
+    if low <= n_vertices <= high:
+        return None
+    return (f"{n_vertices} vertices, far {'fewer' if n_vertices < low else 'more'} than the ~5k of the meshes "
+            "the model was trained on: expect a larger error; --prepare remeshes to ~5k first (results are "
+            "carried back to this file's vertices)")
+
+
+def source_part(mesh: Mesh, source: int) -> tuple[np.ndarray, int]:
+    """Vertices on the source's connected part (bool (N,)) and how many parts the mesh has."""
+    labels = vertex_components(mesh)
+    return labels == labels[source], int(labels.max()) + 1
 
 
 def relative_errors(pred: np.ndarray, exact: np.ndarray, scale: float, source: int) -> np.ndarray:

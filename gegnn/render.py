@@ -99,20 +99,25 @@ def rasterize(vertices: np.ndarray, faces: np.ndarray, view: View, size: int = 5
     return face_img.reshape(size, size), bary_img.reshape(size, size, 3), xy, depth
 
 
+UNREACHABLE = (0.62, 0.62, 0.62, 1.0)  # grey: vertices without a value
+
+
 def shade_field(vertices, faces, field, view: View, *, size=512, cmap="viridis", vmin=None, vmax=None,
                 isolines: int = 12, marker: int | None = None) -> np.ndarray:
     """RGBA image (H, W, 4) of ``field`` (per vertex) with Lambert shading and ``isolines`` levels
     between vmin and vmax; ``marker`` draws a red dot on that vertex when it is visible."""
     import matplotlib
 
-    vmin = float(np.min(field)) if vmin is None else vmin
-    vmax = float(np.max(field)) if vmax is None else vmax
+    vmin = float(np.nanmin(field)) if vmin is None else vmin
+    vmax = float(np.nanmax(field)) if vmax is None else vmax
     face_img, bary, xy, depth = rasterize(vertices, faces, view, size)
     covered = face_img >= 0
     f = np.where(covered, face_img, 0)
     value = (field[faces[f]] * bary).sum(axis=2)
-    t = np.clip((value - vmin) / max(vmax - vmin, 1e-12), 0, 1)
+    unreachable = covered & np.isnan(value)  # NaN: no value there (e.g. another part than the source's)
+    t = np.clip((np.nan_to_num(value) - vmin) / max(vmax - vmin, 1e-12), 0, 1)
     rgba = matplotlib.colormaps[cmap](t)
+    rgba[unreachable] = UNREACHABLE
     n = np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]], vertices[faces[:, 2]] - vertices[faces[:, 0]])
     n_view = (n @ view.rotation.T)[:, 2] / np.maximum(np.linalg.norm(n, axis=1), 1e-30)
     light = 0.45 + 0.55 * np.abs(n_view)[f]
@@ -123,7 +128,7 @@ def shade_field(vertices, faces, field, view: View, *, size=512, cmap="viridis",
         for shift in ((0, 1), (1, 0)):
             other = np.roll(band, shift, axis=(0, 1))
             both = covered & np.roll(covered, shift, axis=(0, 1))
-            edge |= both & (other != band)
+            edge |= both & (other != band) & ~unreachable & ~np.roll(unreachable, shift, axis=(0, 1))
         rgba[edge, :3] *= 0.25
     rgba[~covered] = (1, 1, 1, 0)
     if marker is not None:

@@ -114,3 +114,31 @@ def test_export_fp16_roundtrip(ckpt, tmp_path):
     ea, eb = a.embed(v, f).field(0), b.embed(v, f).field(0)
     np.testing.assert_allclose(eb, ea, rtol=0.02, atol=1e-3)  # fp16 weights: close, not equal
     assert load_checkpoint(out).metadata["dtype"] == "fp16"
+
+
+def test_multi_part_mesh_defines_distances_on_the_source_part(ckpt, tmp_path):
+    """Two spheres far apart: the other one has no geodesic distance from the source (NaN in .npy,
+    grey in the picture, out of the metric); the metric is the source part's alone."""
+    a, fa = ellipsoid((1.0, 1.0, 1.0), subdivisions=3)
+    v = np.concatenate([a, a * 0.5 + [100.0, 0, 0]])
+    f = np.concatenate([fa, fa + len(a)])
+    path = tmp_path / "two.obj"
+    trimesh.Trimesh(v, f, process=False).export(path)
+    result = CliRunner().invoke(main, ["query", ckpt, str(path), "--source", "0", "--exact", "-o",
+                                       str(tmp_path / "f.npy")])
+    assert result.exit_code == 0, result.output
+    assert f"2 separate parts; source 0 is on a part of {len(a)} vertices" in result.output
+    assert "on the source's part" in result.output
+    field = np.load(tmp_path / "f.npy")
+    assert np.isnan(field[len(a):]).all() and np.isfinite(field[:len(a)]).all()
+    result = CliRunner().invoke(main, ["query", ckpt, str(path), "--source", "0", "--exact", "-o",
+                                       str(tmp_path / "f.png")])
+    assert result.exit_code == 0, result.output
+
+
+def test_coarse_mesh_gets_a_resolution_note(ckpt, tmp_path):
+    path = tmp_path / "box.obj"
+    trimesh.creation.box().export(path)
+    result = CliRunner().invoke(main, ["query", ckpt, str(path), "--source", "0"])
+    assert result.exit_code == 0 and "note: 8 vertices, far fewer than the ~5k" in result.output
+    assert "--prepare remeshes" in result.output

@@ -37,3 +37,16 @@ def test_isolines_and_background():
     row = img[50, :, :3].sum(axis=1)  # the square spans pixels 5..95 (5% margin): levels at x = -0.5, 0, 0.5
     dark = np.flatnonzero(row < 0.4 * np.median(row[5:95]))
     assert len(dark) == 3 and np.all(np.abs(dark - np.array([27.5, 50, 72.5])) <= 1)
+
+
+def test_nan_values_are_grey_without_isolines():
+    """Two squares side by side; the right one has no values (another part than the source's)."""
+    v = np.array([[-1, -1, 0], [0, -1, 0], [0, 1, 0], [-1, 1, 0]], float)
+    v = np.concatenate([v, v + [1.0, 0, 0]])
+    f = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]])
+    field = np.r_[v[:4, 0], [np.nan] * 4]
+    img = shade_field(v, f, field, FRONT, size=100, isolines=8, vmin=-1, vmax=0)
+    right = img[20:80, 60:90, :3]
+    np.testing.assert_allclose(right, 0.62)  # facing the viewer: full light, one flat grey, no isoline
+    left = img[20:80, 10:40, :3]
+    assert np.ptp(left[..., 0]) > 0.1  # the colormap on the reachable part
