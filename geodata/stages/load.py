@@ -30,14 +30,14 @@ def load_mesh_bytes(data: bytes, suffix: str, return_map: bool = False):
         raise MeshError("load", "empty file")
     data = _utf8_text(data, suffix)
     try:
-        data = _triangulated(data, suffix)
+        parsed = _triangulated(data, suffix)
     except PolygonError as exc:
         raise MeshError("load", str(exc)) from None
     try:
         # process=False: keep the file's indices so validation sees what the file really says;
         # maintain_order: an OBJ's vertices are not split at texture or normal seams, so vertex k of
         # the result is the file's k-th `v` line.
-        loaded = trimesh.load(io.BytesIO(data), file_type=suffix.lstrip(".").lower(), process=False,
+        loaded = trimesh.load(io.BytesIO(parsed), file_type=suffix.lstrip(".").lower(), process=False,
                               force="mesh", maintain_order=True)
     except Exception as exc:  # trimesh raises many types for garbage input
         reason = explain(data, suffix) or \

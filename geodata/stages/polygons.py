@@ -108,27 +108,29 @@ def _holds_other_corner(pts, k, a, b, c, eps) -> bool:
 
 
 def triangulate_obj_text(text: str) -> str:
-    """An OBJ's polygon faces (4 or more corners) as triangle faces, corner tokens (v/vt/vn) kept."""
+    """An OBJ's polygon faces (4 or more corners) as triangle faces, corner tokens (v/vt/vn) kept, and
+    relative (negative) vertex indices made absolute: trimesh counts them from the file's end, the OBJ
+    format from the face's own line."""
     lines = text.splitlines()
-    if not any(_is_polygon(line, "f") for line in lines):
+    faces = [k for k, line in enumerate(lines) if line.startswith(("f ", "f\t"))]
+    if not any(len(lines[k].split()) > 4 or "-" in lines[k] for k in faces):
         return text
-    vertices, out = [], []
-    for line in lines:
-        if line.startswith(("v ", "v\t")):
-            vertices.append([float(t) for t in line.split()[1:4]])
-    positions = np.asarray(vertices)
-    seen = 0
+    positions = np.array([[float(t) for t in line.split()[1:4]] for line in lines
+                          if line.startswith(("v ", "v\t"))]).reshape(-1, 3)
+    out, seen = [], {"v": 0, "vt": 0, "vn": 0}
     for number, line in enumerate(lines, 1):
-        if line.startswith(("v ", "v\t")):
-            seen += 1
-        if not _is_polygon(line, "f"):
+        key = line.split(maxsplit=1)[0] if line.strip() else ""
+        if key in seen:
+            seen[key] += 1
+        if key != "f":
             out.append(line)
             continue
-        tokens = line.split()[1:]
-        index = [int(t.split("/")[0]) for t in tokens]
-        index = [seen + i if i < 0 else i - 1 for i in index]
+        tokens = [_absolute(t, seen) for t in line.split()[1:]]
+        if len(tokens) == 3:
+            out.append("f " + " ".join(tokens))
+            continue
         try:
-            tris = triangulate_polygon(positions[index])
+            tris = triangulate_polygon(positions[[int(t.split("/")[0]) - 1 for t in tokens]])
         except (PolygonError, IndexError) as exc:
             raise PolygonError(f"line {number}: polygon of {len(tokens)} corners cannot be triangulated "
                                f"faithfully: {exc}") from None
@@ -136,8 +138,14 @@ def triangulate_obj_text(text: str) -> str:
     return "\n".join(out) + "\n"
 
 
-def _is_polygon(line: str, key: str) -> bool:
-    return line.startswith((key + " ", key + "\t")) and len(line.split()) > 4
+def _absolute(token: str, seen: dict) -> str:
+    """A face corner 'v[/vt[/vn]]' with negative (relative) indices made absolute; one that points
+    before the first element is left as written, for the parser to refuse."""
+    parts = token.split("/")
+    for part, kind in zip(range(len(parts)), ("v", "vt", "vn")):
+        if parts[part].startswith("-") and seen[kind] + int(parts[part]) >= 0:
+            parts[part] = str(seen[kind] + int(parts[part]) + 1)
+    return "/".join(parts)
 
 
 def triangulate_off_text(text: str) -> str:

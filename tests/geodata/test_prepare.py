@@ -173,3 +173,23 @@ def test_input_notes_only_for_flat_input():
     assert input_notes(load_mesh_bytes(b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 2 4\n", ".obj")) == []
     square = b"v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3\nf 1 3 4\n"
     assert input_notes(load_mesh_bytes(square, ".obj"))[0].startswith("flat input thickened: all 4 vertices")
+
+
+def test_realworld_kinds_prepare_without_traceback(tmp_path):
+    """Every kind of issue 11 in one folder: the valid ones ok (warnings recorded), the broken ones
+    failed with a reason in the file's own terms, exit 0, no traceback."""
+    from realworld_files import write_fixtures
+
+    expected = write_fixtures(tmp_path / "raw")
+    out = tmp_path / "out.zarr"
+    result = CliRunner().invoke(main, ["prepare", str(tmp_path / "raw"), str(out), "--pairs", "2000",
+                                       "--target-vertices", "600", "--jobs", "2"])
+    assert result.exit_code == 0 and "Traceback" not in result.output, result.output
+    ok = {a["source"]: a for a in store.list_meshes(out).values() if a.get("status") == "ok"}
+    failed = {a["source"]: a for a in store.list_failures(out).values()}
+    for name, (status, words) in expected.items():
+        if status == "ok":
+            assert name in ok, failed.get(name)
+            assert words in "; ".join(ok[name].get("warnings", [])) if words else not ok[name].get("warnings")
+        else:
+            assert name in failed and words in failed[name]["error"], (name, failed.get(name))
