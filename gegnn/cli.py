@@ -181,6 +181,11 @@ def query(files, pretrained, source, pairs_csv, output, exact, prepare, device, 
     allowed = (".csv",) if pairs_csv else (".npy", ".ply", ".png")
     if output and suffix not in allowed:
         raise click.BadParameter(f"expected one of {', '.join(allowed)}", param_hint="-o")
+    if output:
+        try:
+            Path(output).parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise click.ClickException(f"{output}: cannot write there: {exc.strerror or exc}") from None
     try:
         qm = load_query_mesh(mesh_path, prepare=prepare)
         pairs = read_pairs(pairs_csv) if pairs_csv else np.array([[source, 0]])
