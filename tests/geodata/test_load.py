@@ -3,6 +3,7 @@ import pytest
 
 from geodata.mesh import MeshError, closed_manifold_problem
 from geodata.stages.load import load_mesh_bytes
+from realworld_files import ring_obj
 
 CUBE_OBJ = b"""v 0 0 0
 v 1 0 0
@@ -42,6 +43,8 @@ def test_duplicate_vertices_are_merged():
     assert merged.n_vertices == 8 and closed_manifold_problem(merged) is None
 
 
+PLY_HEAD = (b"ply\nformat {fmt} 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+            b"element face 1\nproperty list uchar int vertex_indices\nend_header\n")
 BAD_INPUTS = {
     "empty": (b"", ".obj", "empty file"),
     "garbage": (bytes(range(256)) * 40, ".ply", "not a PLY file"),
@@ -51,6 +54,21 @@ BAD_INPUTS = {
     "index out of range": (b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n", ".off", "range"),
     "no faces": (b"v 0 0 0\nv 1 0 0\nv 0 1 0\n", ".obj", ""),
     "all degenerate": (b"v 0 0 0\nv 1 0 0\nv 2 0 0\nv 0 1 0\nf 1 2 3\nf 1 1 4\n", ".obj", "degenerate"),
+    # reasons a user can act on, in the file's own terms
+    "OBJ index past the end, 1-based with its line":
+        (b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 2 12\n", ".obj",
+         "line 6: face refers to vertex 12; the file has 4 vertices (OBJ counts from 1)"),
+    "OBJ negative index before the first vertex":
+        (b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf -1 -2 -4\n", ".obj", "line 4: face refers to vertex -4; the file has 3"),
+    "OFF header absurd": (b"OFF\n353535235358 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n", ".off",
+                          "OFF header declares 353535235358 vertices and 1 faces but the file holds 4 data lines"),
+    "PLY header truncated": (b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty flo", ".ply",
+                             "PLY header truncated (no end_header line)"),
+    "binary PLY body short": (PLY_HEAD.replace(b"{fmt}", b"binary_little_endian") + b"\0\0\0", ".ply",
+                              "PLY header declares 3 vertices (36 bytes) but only 3 bytes follow the header"),
+    "ASCII PLY body short": (PLY_HEAD.replace(b"{fmt}", b"ascii") + b"0 0 0\n1 0 0\n", ".ply",
+                             "PLY header declares 3 vertices and 1 faces but the file holds 2 data lines"),
+    "OBJ point cloud": (b"v 0 0 0\nv 1 0 0\nv 0 1 0\n", ".obj", "point cloud: 3 vertices and no faces"),
 }
 
 
@@ -73,34 +91,6 @@ def test_latin1_text_loads_without_optional_modules():
     np.testing.assert_array_equal(a.faces, b.faces)
 
 
-PLY_HEAD = (b"ply\nformat {fmt} 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
-            b"element face 1\nproperty list uchar int vertex_indices\nend_header\n")
-REASONS = {  # broken files and the reason a user can act on, in the file's own terms
-    "OBJ index past the end, 1-based with its line":
-        (b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 2 12\n", ".obj",
-         "line 6: face refers to vertex 12; the file has 4 vertices (OBJ counts from 1)"),
-    "OBJ negative index before the first vertex":
-        (b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf -1 -2 -4\n", ".obj", "line 4: face refers to vertex -4; the file has 3"),
-    "OFF header absurd": (b"OFF\n353535235358 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n", ".off",
-                          "OFF header declares 353535235358 vertices and 1 faces but the file holds 4 data lines"),
-    "PLY header truncated": (b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty flo", ".ply",
-                             "PLY header truncated (no end_header line)"),
-    "binary PLY body short": (PLY_HEAD.replace(b"{fmt}", b"binary_little_endian") + b"\0\0\0", ".ply",
-                              "PLY header declares 3 vertices (36 bytes) but only 3 bytes follow the header"),
-    "ASCII PLY body short": (PLY_HEAD.replace(b"{fmt}", b"ascii") + b"0 0 0\n1 0 0\n", ".ply",
-                             "PLY header declares 3 vertices and 1 faces but the file holds 2 data lines"),
-    "OBJ point cloud": (b"v 0 0 0\nv 1 0 0\nv 0 1 0\n", ".obj", "point cloud: 3 vertices and no faces"),
-}
-
-
-@pytest.mark.parametrize("name", REASONS)
-def test_reasons_in_the_files_own_terms(name):
-    data, suffix, reason = REASONS[name]
-    with pytest.raises(MeshError) as info:
-        load_mesh_bytes(data, suffix)
-    assert reason in info.value.reason
-
-
 def test_negative_obj_indices_are_valid():
     quad = b"v 0 0 0\nv 1 0 0\nv 1 1 0\nf -3 -2 -1\nv 0 1 0\nf -4 -2 -1\n"
     assert load_mesh_bytes(quad, ".obj").n_faces == 2
@@ -118,16 +108,6 @@ def test_obj_with_texture_and_normal_seams_keeps_the_files_vertex_numbering(tmp_
     loaded, to_mesh = load_mesh_file(tmp_path / "seams.obj")
     assert len(to_mesh) == 8  # one entry per v line of the file (trimesh split them into 21 by default)
     np.testing.assert_array_equal(loaded.vertices[to_mesh], mesh.vertices)
-
-
-def ring_obj(n=24, r_in=0.5) -> tuple[bytes, float]:
-    """A flat annulus as ONE concave OBJ face: outer ring, a bridge edge, the inner ring backwards."""
-    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
-    outer = np.stack([np.cos(t), np.sin(t), np.zeros(n)], 1)
-    text = "".join(f"v {x} {y} {z}\n" for x, y, z in np.concatenate([outer, r_in * outer]))
-    corners = list(range(1, n + 1)) + [1, n + 1] + list(range(2 * n, n + 1, -1)) + [n + 1]
-    area = 0.5 * n * np.sin(2 * np.pi / n) * (1 - r_in ** 2)
-    return (text + "f " + " ".join(map(str, corners)) + "\n").encode(), area
 
 
 def mesh_area(mesh) -> float:
