@@ -25,6 +25,16 @@ def ring_obj(n: int = 24, r_in: float = 0.5) -> tuple[bytes, float]:
     return text.encode(), area
 
 
+def ring_ply() -> bytes:
+    """The same annulus as one polygon face of an ASCII PLY (PLY counts from 0)."""
+    lines = ring_obj()[0].decode().splitlines()
+    corners = [int(t) - 1 for t in lines[-1].split()[1:]]
+    vertices = [line[2:] for line in lines[:-1]]
+    head = (f"ply\nformat ascii 1.0\nelement vertex {len(vertices)}\nproperty float x\nproperty float y\n"
+            "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n")
+    return (head + "\n".join(vertices) + f"\n{len(corners)} " + " ".join(map(str, corners)) + "\n").encode()
+
+
 def quads_obj() -> bytes:
     """The unit cube as quads, two of them 5-gons sharing an edge's midpoint."""
     text = vertex_lines(CUBE_V + [(0.5, 0, 0)])
@@ -68,6 +78,7 @@ def write_fixtures(folder: Path) -> dict[str, tuple[str, str]]:
     ("failed", reason words)."""
     files = {
         "ring.obj": (ring_obj()[0], ("ok", "flat input thickened")),
+        "ring.ply": (ring_ply(), ("ok", "flat input thickened")),
         "quads.obj": (quads_obj(), ("ok", "")),
         "negative.obj": (negative_obj(), ("ok", "")),
         "latin1.obj": (latin1_obj(), ("ok", "")),

@@ -8,7 +8,7 @@ import numpy as np
 import trimesh
 
 from geodata.mesh import Mesh, MeshError, one_line
-from geodata.stages.polygons import PolygonError, triangulate_obj_text, triangulate_off_text
+from geodata.stages.polygons import PolygonError, triangulate_faces, triangulate_obj_text, triangulate_off_text
 
 __all__ = ["MESH_SUFFIXES", "load_mesh_bytes", "load_mesh_file", "clean", "explain"]
 
@@ -47,6 +47,12 @@ def load_mesh_bytes(data: bytes, suffix: str, return_map: bool = False):
         raise MeshError("load", "file holds no triangle mesh")
     vertices = np.asarray(loaded.vertices, dtype=np.float64).reshape(-1, 3)
     faces = np.asarray(loaded.faces).reshape(-1, 3)
+    polygons = _ply_polygons(loaded) if suffix.lower() == ".ply" else None
+    if polygons is not None:  # trimesh fanned them: ear-clip the file's own corner lists instead
+        try:
+            faces = triangulate_faces(vertices, polygons)
+        except PolygonError as exc:
+            raise MeshError("load", str(exc)) from None
     if len(faces) == 0:  # a truncated file, or a point cloud (trimesh drops an OBJ's lone vertices)
         n = len(vertices) or _file_vertex_count(data, suffix)
         raise MeshError("load", explain(data, suffix) or (f"point cloud: {n} vertices and no faces" if n
@@ -55,7 +61,6 @@ def load_mesh_bytes(data: bytes, suffix: str, return_map: bool = False):
 
 
 TEXT_SUFFIXES = (".obj", ".off")  # always text; PLY and STL may be binary and are passed through
-# PLY polygons are still fanned by trimesh (ASCII and binary bodies would need a parser of our own).
 
 
 def _utf8_text(data: bytes, suffix: str) -> bytes:
@@ -69,6 +74,15 @@ def _utf8_text(data: bytes, suffix: str) -> bytes:
         return data
     except UnicodeDecodeError:
         return data.decode("latin-1").encode("utf-8")
+
+
+def _ply_polygons(loaded):
+    """A PLY's face corner lists as read by trimesh, when some face has more than 3 corners (else None)."""
+    face = loaded.metadata.get("_ply_raw", {}).get("face", {}).get("data", {})
+    lists = face.get("vertex_indices", face.get("vertex_index")) if isinstance(face, dict) else None
+    if lists is None or (lists.dtype != object and lists.ndim == 2 and lists.shape[1] == 3):
+        return None
+    return list(lists) if lists.dtype == object else lists
 
 
 def _triangulated(data: bytes, suffix: str) -> bytes:

@@ -1,6 +1,6 @@
 r"""Polygon faces to triangles as what they are: ear clipping in the polygon's own plane.
 
-trimesh cuts an OBJ/OFF polygon as a fan from its first corner, which fills a concave polygon (a ring
+trimesh cuts an OBJ/OFF/PLY polygon as a fan from its first corner, which fills a concave polygon (a ring
 drawn as one face with a bridge edge becomes a disc). Here every face of more than three corners is
 projected on its plane (Newell's normal) and ear-clipped; quads pick the diagonal that keeps both
 triangles facing the quad's way. A polygon whose triangles do not cover exactly its area
@@ -15,7 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["PolygonError", "triangulate_polygon", "triangulate_obj_text", "triangulate_off_text"]
+__all__ = ["PolygonError", "triangulate_polygon", "triangulate_obj_text", "triangulate_off_text",
+           "triangulate_faces"]
 
 AREA_TOLERANCE = 1e-6
 
@@ -178,3 +179,20 @@ def triangulate_off_text(text: str) -> str:
         faces += [f"3 {corners[a]} {corners[b]} {corners[c]}" for a, b, c in tris]
     lines[counts_line] = (f"{head[0]} " if len(head) > 1 else "") + f"{nv} {len(faces)} 0"
     return "\n".join(lines[:face_lines[0]] + faces + lines[face_lines[-1] + 1:]) + "\n"
+
+
+def triangulate_faces(vertices: np.ndarray, polygons) -> np.ndarray:
+    """Faces given as corner lists (e.g. a PLY's ``vertex_indices``, counted from 0) as triangles (F, 3)."""
+    tris = []
+    for number, corners in enumerate(polygons):
+        corners = np.asarray(corners, dtype=np.int64)
+        if len(corners) == 3:
+            tris.append(corners[None])
+            continue
+        try:
+            local = triangulate_polygon(vertices[corners])
+        except (PolygonError, IndexError) as exc:
+            raise PolygonError(f"face {number} (counted from 0): polygon of {len(corners)} corners cannot be "
+                               f"triangulated faithfully: {exc}") from None
+        tris.append(corners[np.asarray(local, dtype=np.int64).reshape(-1, 3)])
+    return np.concatenate(tris) if tris else np.zeros((0, 3), dtype=np.int64)
