@@ -9,7 +9,9 @@ triangles facing the quad's way. A polygon whose triangles do not cover exactly 
     \sum_t |A_t| = |A_{\text{polygon}}| \quad (\text{relative } 10^{-6})
 
 (self-intersecting, or too far from planar to project) cannot be triangulated faithfully: it is an
-error naming the file's line, never a guess.
+error naming the file's line, never a guess. Quads split along a diagonal whatever their shape, and
+polygons without area give no triangles (as a zero-area triangle is dropped): both are common in
+catalog files and neither changes the surface.
 """
 from __future__ import annotations
 
@@ -19,6 +21,7 @@ __all__ = ["PolygonError", "triangulate_polygon", "triangulate_obj_text", "trian
            "triangulate_faces"]
 
 AREA_TOLERANCE = 1e-6
+FLAT_AREA = 1e-9  # |area| / extent^2 below which a polygon has no area
 
 
 class PolygonError(ValueError):
@@ -28,18 +31,41 @@ class PolygonError(ValueError):
 def triangulate_polygon(points: np.ndarray) -> list[tuple[int, int, int]]:
     """Triangles (corner indices into ``points``, (n, 3)) of one simple polygon, wound as the polygon.
 
-    Repeated corners (bridge edges joining a hole to the outer ring) are allowed.
+    Repeated corners (bridge edges joining a hole to the outer ring) are allowed. A polygon without
+    area (its corners on a line or a point, common in catalog files) has no triangles, as a zero-area
+    triangle is dropped; a quad always splits along one of its diagonals (the one whose two triangles
+    face the quad's way), even when non-planar.
     """
-    xy = _project(np.asarray(points, dtype=np.float64))
+    points = np.asarray(points, dtype=np.float64)
+    if len(points) == 3:
+        return [(0, 1, 2)]
+    if len(points) == 4:
+        return _split_quad(points)  # zero-area triangles are dropped by the load stage
+    extent = np.ptp(points, axis=0).max()
+    try:
+        xy = _project(points)
+    except PolygonError:
+        return []  # no area in any plane
     area = _signed_area(xy)
-    if not abs(area) > 0:
-        raise PolygonError("zero signed area in its plane (degenerate or self-intersecting)")
+    if abs(area) <= FLAT_AREA * extent * extent:
+        return []
     order = list(range(len(xy))) if area > 0 else list(range(len(xy)))[::-1]
     tris = _ear_clip(xy, order)
     covered = sum(abs(_tri_area(xy[a], xy[b], xy[c])) for a, b, c in tris)
     if abs(covered - abs(area)) > AREA_TOLERANCE * abs(area):
         raise PolygonError(f"self-intersecting in its plane (triangles cover {covered / abs(area):.3g}x its area)")
     return tris if area > 0 else [(a, c, b) for a, b, c in tris]
+
+
+def _split_quad(p: np.ndarray) -> list[tuple[int, int, int]]:
+    """The diagonal whose two triangles' normals agree best (both face the quad's way when convex)."""
+    def agreement(t1, t2):
+        n1 = np.cross(p[t1[1]] - p[t1[0]], p[t1[2]] - p[t1[0]])
+        n2 = np.cross(p[t2[1]] - p[t2[0]], p[t2[2]] - p[t2[0]])
+        return float(n1 @ n2) / max(np.linalg.norm(n1) * np.linalg.norm(n2), 1e-300)
+
+    splits = [[(0, 1, 2), (0, 2, 3)], [(0, 1, 3), (1, 2, 3)]]
+    return max(splits, key=lambda pair: agreement(*pair))
 
 
 def _project(points: np.ndarray) -> np.ndarray:

@@ -138,6 +138,16 @@ def test_quads_and_ngons_as_the_same_surface_as_triangles():
 
 
 def test_self_intersecting_polygon_is_a_failure_naming_its_line():
-    bowtie = b"v 0 0 0\nv 1 1 0\nv 1 0 0\nv 0 1 0\nv 2 2 0\nf 1 2 3\nf 1 2 3 4\n"
-    with pytest.raises(MeshError, match="line 7: polygon of 4 corners cannot be triangulated faithfully"):
-        load_mesh_bytes(bowtie, ".obj")
+    """A pentagram drawn in one stroke: no triangulation covers exactly its area."""
+    star = "".join(f"v {np.cos(a):.6f} {np.sin(a):.6f} 0\n" for a in np.linspace(0, 2 * np.pi, 5, endpoint=False))
+    data = (star + "f 1 2 3\nf 1 3 5 2 4\n").encode()
+    with pytest.raises(MeshError, match="line 7: polygon of 5 corners cannot be triangulated faithfully"):
+        load_mesh_bytes(data, ".obj")
+
+
+def test_quads_split_and_flat_polygons_vanish_as_catalog_files_need():
+    """A bow-tie (strongly non-planar) quad still becomes two triangles; a polygon on a line has none."""
+    data = b"v 0 0 0\nv 1 1 0\nv 1 0 0\nv 0 1 0\nv 2 0 0\nv 3 0 0\nv 0 0 1\n" \
+           b"f 1 2 3 4\nf 1 3 5 6\nf 1 3 7\n"
+    mesh = load_mesh_bytes(data, ".obj")
+    assert mesh.n_faces == 3  # 2 from the bow-tie, 0 from the collinear quad, the triangle
