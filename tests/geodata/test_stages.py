@@ -5,7 +5,6 @@ built with trimesh.creation.
 """
 from __future__ import annotations
 
-import hashlib
 import subprocess
 import sys
 import textwrap
