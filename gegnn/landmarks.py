@@ -72,12 +72,15 @@ def landmark_fields(vertices, faces, k: int, seed: int = 0, t_coef: float = T_CO
     n_comp = int(labels.max()) + 1 if len(labels) else 0
     out = np.zeros((mesh.n_vertices, k), dtype=np.float32)
     landmarks = np.zeros((n_comp, k), dtype=np.int64)
-    face_comp = labels[mesh.faces[:, 0]]
+    # Vertices and faces grouped by component once (stable: each group keeps the mesh's order), so a
+    # mesh of many parts costs O(N + F), not O((N + F) x parts).
+    vertex_groups = _groups(labels, n_comp)
+    face_groups = _groups(labels[mesh.faces[:, 0]], n_comp)
+    local = np.empty(mesh.n_vertices, dtype=np.int64)  # index within the vertex's own component
     for c in range(n_comp):
-        idx = np.flatnonzero(labels == c)
-        local = np.full(mesh.n_vertices, -1, dtype=np.int64)
+        idx = vertex_groups[c]
         local[idx] = np.arange(len(idx))
-        sub_faces = local[mesh.faces[face_comp == c]]
+        sub_faces = local[mesh.faces[face_groups[c]]]
         rng = np.random.default_rng([seed, c])
         if len(idx) < 3 or not len(sub_faces):
             landmarks[c] = idx[0]
@@ -88,6 +91,12 @@ def landmark_fields(vertices, faces, k: int, seed: int = 0, t_coef: float = T_CO
         out[idx] = fields[:, cols]
         landmarks[c] = idx[np.asarray(chosen)[cols]]
     return LandmarkFields(out, landmarks, labels)
+
+
+def _groups(labels: np.ndarray, n: int) -> list[np.ndarray]:
+    """Indices of each label 0..n-1, ascending."""
+    order = np.argsort(labels, kind="stable")
+    return np.split(order, np.searchsorted(labels[order], np.arange(1, n)))
 
 
 def _farthest_point_fields(solver, n: int, k: int, first: int) -> tuple[list[int], np.ndarray]:
