@@ -8,7 +8,8 @@ import numpy as np
 import trimesh
 
 from geodata.mesh import Mesh, MeshError, one_line
-from geodata.stages.polygons import PolygonError, triangulate_faces, triangulate_obj_text, triangulate_off_text
+from geodata.stages.polygons import (PolygonError, off_layout, triangulate_faces, triangulate_obj_text,
+                                     triangulate_off_text)
 
 __all__ = ["MESH_SUFFIXES", "load_mesh_bytes", "load_mesh_file", "clean", "explain"]
 
@@ -146,14 +147,12 @@ def _data_lines(lines: list[str]) -> list[str]:
 
 
 def _explain_off(data: bytes) -> str | None:
-    lines = _data_lines(data.decode("latin-1").splitlines())
-    tokens = lines[0].split()
-    if not tokens[0].endswith("OFF"):
+    layout = off_layout(data.decode("latin-1").splitlines())
+    if layout is None:
         return "not an OFF file: no OFF header on the first line"
-    counts, rest = (tokens[1:4], lines[1:]) if len(tokens) > 1 else (lines[1].split()[:3], lines[2:])
-    nv, nf = int(counts[0]), int(counts[1])
-    if len(rest) < nv + nf:
-        return f"OFF header declares {nv} vertices and {nf} faces but the file holds {len(rest)} data lines"
+    lines, first, nv, nf = layout
+    if len(lines) - first < nv + nf:
+        return f"OFF header declares {nv} vertices and {nf} faces but the file holds {len(lines) - first} data lines"
     return None
 
 

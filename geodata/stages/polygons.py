@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["PolygonError", "triangulate_polygon", "triangulate_obj_text", "triangulate_off_text",
-           "triangulate_faces"]
+           "triangulate_faces", "off_layout"]
 
 AREA_TOLERANCE = 1e-6
 FLAT_AREA = 1e-9  # |area| / extent^2 below which a polygon has no area
@@ -175,16 +175,29 @@ def _absolute(token: str, seen: dict) -> str:
     return "/".join(parts)
 
 
+def off_layout(lines: list[str]) -> tuple[list[int], int, int, int] | None:
+    """Where an OFF file's parts are: the indices of its data lines (not blank, not # comments), the
+    position among them of the first vertex line, and the declared vertex and face counts; None when
+    the first data line is no OFF header. The counts follow the keyword ("OFF 8 6 0") or sit on the
+    next line."""
+    data = [k for k, line in enumerate(lines) if line.strip() and not line.lstrip().startswith("#")]
+    head = lines[data[0]].split() if data else []
+    if not head or not head[0].endswith("OFF"):
+        return None
+    if len(head) > 1:
+        return data, 1, int(head[1]), int(head[2])
+    nv, nf = (int(w) for w in lines[data[1]].split()[:2])
+    return data, 2, nv, nf
+
+
 def triangulate_off_text(text: str) -> str:
     """An OFF's polygon faces (4 or more corners) as triangle faces (a polygon's colour is dropped)."""
     lines = text.splitlines()
-    data = [k for k, line in enumerate(lines) if line.strip() and not line.lstrip().startswith("#")]
-    head = lines[data[0]].split()
-    if len(head) > 1:  # "OFF nv nf ne" on one line
-        counts_line, first, nv, nf = data[0], 1, int(head[1]), int(head[2])
-    else:
-        counts_line, first = data[1], 2
-        nv, nf = (int(w) for w in lines[data[1]].split()[:2])
+    layout = off_layout(lines)
+    if layout is None:
+        return text
+    data, first, nv, nf = layout
+    counts_line = data[first - 1]
     vertex_lines, face_lines = data[first:first + nv], data[first + nv:first + nv + nf]
     if not any(int(lines[k].split()[0]) > 3 for k in face_lines):
         return text
@@ -203,7 +216,7 @@ def triangulate_off_text(text: str) -> str:
             raise PolygonError(f"line {k + 1}: polygon of {n} corners cannot be triangulated faithfully: "
                                f"{exc}") from None
         faces += [f"3 {corners[a]} {corners[b]} {corners[c]}" for a, b, c in tris]
-    lines[counts_line] = (f"{head[0]} " if len(head) > 1 else "") + f"{nv} {len(faces)} 0"
+    lines[counts_line] = (f"{lines[data[0]].split()[0]} " if first == 1 else "") + f"{nv} {len(faces)} 0"
     return "\n".join(lines[:face_lines[0]] + faces + lines[face_lines[-1] + 1:]) + "\n"
 
 
