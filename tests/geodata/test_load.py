@@ -3,7 +3,7 @@ import pytest
 
 from geodata.mesh import MeshError, closed_manifold_problem
 from geodata.stages.load import load_mesh_bytes
-from realworld_files import ring_obj, ring_ply
+from realworld_files import CUBE_QUADS, CUBE_V, quads_obj, ring_obj, ring_ply
 
 CUBE_OBJ = b"""v 0 0 0
 v 1 0 0
@@ -125,14 +125,10 @@ def test_concave_ring_polygon_keeps_its_area(suffix):
 
 def test_quads_and_ngons_as_the_same_surface_as_triangles():
     """The cube as quads and two 5-gons sharing a midpoint of an edge (OBJ), and as OFF quads."""
-    quads = [(1, 4, 3, 2), (5, 6, 7, 8), (1, 2, 6, 5), (2, 3, 7, 6), (3, 4, 8, 7), (4, 1, 5, 8)]
-    text = CUBE_OBJ.decode().split("f ")[0] + "v 0.5 0 0\n"
-    text += "".join("f " + " ".join(map(str, q)) + "\n" for q in quads[3:] + [quads[1]])
-    text += "f 1 4 3 2 9\nf 9 2 6 5 1\n"
-    mesh = load_mesh_bytes(text.encode(), ".obj")
+    mesh = load_mesh_bytes(quads_obj(), ".obj")
     assert closed_manifold_problem(mesh) is None and abs(mesh_area(mesh) - 6) < 1e-9
-    off = "OFF\n8 6 0\n" + "".join(line[2:] + "\n" for line in CUBE_OBJ.decode().splitlines() if line.startswith("v "))
-    off += "".join("4 " + " ".join(str(i - 1) for i in q) + "\n" for q in quads)
+    off = "OFF\n8 6 0\n" + "".join(f"{x} {y} {z}\n" for x, y, z in CUBE_V)
+    off += "".join("4 " + " ".join(str(i - 1) for i in q) + "\n" for q in CUBE_QUADS)
     mesh = load_mesh_bytes(off.encode(), ".off")
     assert closed_manifold_problem(mesh) is None and mesh.n_faces == 12
 
