@@ -76,3 +76,22 @@ def small_config(channels=16, blocks=1, **kw):
     from gegnn import GeGnnConfig
     return GeGnnConfig(channels=channels, embed_dim=channels, decoder_hidden=channels,
                        encoder_blocks=(blocks,) * 5, decoder_blocks=(blocks,) * 5, **kw)
+
+
+def overfit(store, steps, channels=64, landmarks=0):
+    """MRE on the mesh "ellipsoid" of ``store`` before the first step and after ``steps`` steps."""
+    import torch
+
+    from gegnn import GeGnn
+    from gegnn.data import BatchDataset
+    from gegnn.train import lr_at, relative_error, train_step
+
+    torch.manual_seed(0)
+    model = GeGnn(small_config(channels, landmarks=landmarks))
+    batch = BatchDataset(store, "geodesic", 0, None, False, 5, 1 / 16, 3 / 16, landmarks)[(0, ("ellipsoid",))]
+    opt = torch.optim.AdamW(model.parameters(), lr=3e-3, weight_decay=0.01)
+    first = train_step(model, batch, opt, 3e-3, 0.0, torch.device("cpu"))
+    for s in range(1, steps):
+        train_step(model, batch, opt, lr_at(s, steps, 3e-3, 0), 0.0, torch.device("cpu"))
+    with torch.no_grad():
+        return first, relative_error(model(batch.hierarchy, batch.pairs, batch.fields), batch.distances).mean().item()

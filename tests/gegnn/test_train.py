@@ -5,27 +5,13 @@ from pathlib import Path
 import pytest
 import torch
 import torch.multiprocessing as mp
-from gegnn_stores import small_config
+from gegnn_stores import overfit, small_config
 
 import gegnn.train as gtrain
 from gegnn import GeGnn
 from gegnn.checkpoint import load_checkpoint
 from gegnn.data import BatchDataset
-from gegnn.train import TrainConfig, lr_at, relative_error, train, train_step
-
-CPU = torch.device("cpu")
-
-
-def overfit(store, steps, channels=64):
-    torch.manual_seed(0)
-    model = GeGnn(small_config(channels))
-    batch = BatchDataset(store, "geodesic", 0, None, False, 5, 1 / 16, 3 / 16)[(0, ("ellipsoid",))]
-    opt = torch.optim.AdamW(model.parameters(), lr=3e-3, weight_decay=0.01)
-    first = train_step(model, batch, opt, 3e-3, 0.0, CPU)
-    for s in range(1, steps):
-        train_step(model, batch, opt, lr_at(s, steps, 3e-3, 0), 0.0, CPU)
-    with torch.no_grad():
-        return first, relative_error(model(batch.hierarchy, batch.pairs), batch.distances).mean().item()
+from gegnn.train import TrainConfig, relative_error, train
 
 
 def test_overfit_one_mesh_learns(one_mesh_store):
