@@ -76,8 +76,8 @@ def load_query_mesh(path, prepare: bool = False, target_vertices: int = 5000) ->
 
 
 def exact_field(mesh: Mesh, source: int) -> np.ndarray:
-    """Exact geodesic distances from ``source`` (tvb-gdist), in a forked child: Kirsanov's code
-    segfaults on some inputs, which then fail with a MeshError instead of killing the caller."""
+    """Exact geodesic distances from ``source`` (the default geodata backend), in a forked child: native
+    code that crashes on some input then fails with a MeshError instead of killing the caller."""
     from geodata.geodesic import exact_geodesic_distances
     from geodata.parallel import run_isolated
 

@@ -12,6 +12,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from geodata import store
+from geodata.geodesic import BACKENDS as BACKENDS_GEODESIC
 from geodata.parallel import BACKENDS, parallel_map, parse_shard
 
 log = logging.getLogger("geodata")
@@ -106,8 +107,9 @@ def main():
 @click.option("--collapse", default=0.15, show_default=True, type=click.FloatRange(0, 0.9),
               help="Fraction of edges removed by the final QEM edge collapse.")
 @click.option("--seed", default=0, show_default=True, help="Seed of the pair sampling (per mesh: seed + mesh id).")
-@click.option("--geodesic-backend", type=click.Choice(["gdist", "libigl"]), default="gdist", show_default=True,
-              help="Exact geodesic code: tvb-gdist (fast) or libigl (reference); both give the same distances.")
+@click.option("--geodesic-backend", type=click.Choice(BACKENDS_GEODESIC), default="vtp", show_default=True,
+              help="Exact geodesic code, all equal to 1e-9: vtp (this package's solver, the fastest), "
+                   "tvb-gdist or libigl (the reference). The store records it and refuses a run with another.")
 @click.option("--timeout", default=1800.0, show_default=True, help="Seconds one mesh may take before it counts as failed.")
 @click.option("--retry-failed", is_flag=True, help="Try again the meshes recorded under failed/.")
 @click.option("--strict", is_flag=True, help="Exit with status 1 when any mesh of this run failed (default: 0, "

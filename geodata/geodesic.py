@@ -1,38 +1,59 @@
-"""Exact polyhedral geodesic distances (Surazhsky-Kirsanov / MMP family) and the pair sampler.
+"""Exact polyhedral geodesic distances (MMP family) and the pair sampler.
 
-Two backends compute the same exact distances: libigl's `exact_geodesic` (the reference) and
-tvb-gdist (faster: one call builds its mesh and propagates from one source). Both are Kirsanov's
-code and segfault on non-manifold input, so every call first checks the closed-manifold invariants.
+Three backends compute the same exact distances:
+
+- ``vtp`` (default): this package's own window-propagation solver (``src/exact_geodesic.cpp``), the
+  fastest; the mesh is prepared once for all sources of a mesh.
+- ``gdist``: tvb-gdist, Kirsanov's implementation of Surazhsky et al. (it rebuilds its mesh per call).
+- ``libigl``: libigl's ``exact_geodesic``, the same Kirsanov code: the reference the others are tested
+  against (to 1e-9 relative).
+
+Kirsanov's code segfaults on non-manifold input, so every call first checks the closed-manifold
+invariants; the same guard keeps the contract of the ``vtp`` solver, which is only tested on such meshes.
 """
 from __future__ import annotations
+
+from typing import Callable
 
 import numpy as np
 
 from geodata.mesh import Mesh, MeshError, closed_manifold_problem, vertex_components
 
-__all__ = ["BACKENDS", "exact_geodesic_distances", "sample_sources", "exact_geodesic_pairs"]
+__all__ = ["BACKENDS", "geodesic_solver", "exact_geodesic_distances", "sample_sources", "exact_geodesic_pairs"]
 
-BACKENDS = ("gdist", "libigl")
+BACKENDS = ("vtp", "gdist", "libigl")
 
 
-def exact_geodesic_distances(mesh: Mesh, source: int, backend: str = "gdist") -> np.ndarray:
-    """Exact geodesic distance (float64, (N,)) from vertex `source` to every vertex.
+def geodesic_solver(mesh: Mesh, backend: str = "vtp") -> Callable[[int], np.ndarray]:
+    """A function source -> exact geodesic distances (float64, (N,)) from that vertex to every vertex.
 
-    Only distances within the source's connected component are meaningful (gdist gives inf
-    elsewhere, libigl 0).
+    Only distances within the source's connected component are meaningful (vtp and gdist give inf
+    elsewhere, libigl 0). Whatever a backend precomputes for the mesh is done once, here.
     """
+    if backend == "vtp":
+        from geodata._exact_geodesic import Surface
+
+        surface = Surface(np.ascontiguousarray(mesh.vertices, dtype=np.float64),
+                          np.ascontiguousarray(mesh.faces, dtype=np.int32))
+        return lambda source: surface.distances(np.array([source], dtype=np.int64))[0]
     if backend == "gdist":
         import gdist
 
-        return gdist.compute_gdist(mesh.vertices, mesh.faces.astype(np.int32),
-                                   np.array([source], dtype=np.int32))
+        vertices, faces = mesh.vertices.astype(np.float64), mesh.faces.astype(np.int32)
+        return lambda source: gdist.compute_gdist(vertices, faces, np.array([source], dtype=np.int32))
     if backend == "libigl":
         import igl
 
+        targets = np.arange(mesh.n_vertices, dtype=np.int64)
         # Keywords only: positional slots silently return an empty array (libigl-python-bindings#284).
-        return igl.exact_geodesic(V=mesh.vertices, F=mesh.faces, VS=np.array([source], dtype=np.int64),
-                                  VT=np.arange(mesh.n_vertices, dtype=np.int64))
+        return lambda source: igl.exact_geodesic(V=mesh.vertices, F=mesh.faces,
+                                                 VS=np.array([source], dtype=np.int64), VT=targets)
     raise ValueError(f"unknown geodesic backend {backend!r}; choose from {BACKENDS}")
+
+
+def exact_geodesic_distances(mesh: Mesh, source: int, backend: str = "vtp") -> np.ndarray:
+    """Exact geodesic distance (float64, (N,)) from vertex `source` to every vertex (see `geodesic_solver`)."""
+    return geodesic_solver(mesh, backend)(source)
 
 
 def sample_sources(labels: np.ndarray, n_pairs: int, rng: np.random.Generator) -> np.ndarray:
@@ -43,25 +64,26 @@ def sample_sources(labels: np.ndarray, n_pairs: int, rng: np.random.Generator) -
     return order[:n_sources]
 
 
-def exact_geodesic_pairs(mesh: Mesh, n_pairs: int, rng: np.random.Generator, backend: str = "gdist"
+def exact_geodesic_pairs(mesh: Mesh, n_pairs: int, rng: np.random.Generator, backend: str = "vtp"
                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Pairs (P, 2) uint32 and exact distances (P,) float32: sources x every other vertex of their component.
 
     Sources come in the order of `sample_sources`. Kirsanov's code, rarely, leaves a vertex unreached
-    from one particular source of a clean mesh (libigl/libigl#1013; inf from gdist, 0 from libigl):
-    such a source is skipped for the next one and returned as the third value. A mesh where more
-    than a tenth of the sources fail is refused.
+    from one particular source of a clean mesh (libigl/libigl#1013; inf from gdist, 0 from libigl); from
+    any backend, such a source is skipped for the next one and returned as the third value. A mesh where
+    more than a tenth of the sources fail is refused.
     """
     problem = closed_manifold_problem(mesh)
     if problem is not None:  # would crash the native code
         raise MeshError("geodesic", problem)
+    solve = geodesic_solver(mesh, backend)
     labels = vertex_components(mesh)
     sizes = np.bincount(labels)
     pairs, dists, skipped, total = [], [], [], 0
     for s in rng.permutation(mesh.n_vertices):
         if total >= n_pairs:
             break
-        d = exact_geodesic_distances(mesh, int(s), backend)
+        d = solve(int(s))
         targets = np.flatnonzero(labels == labels[s])
         targets = targets[targets != s]
         if not (np.isfinite(d[targets]).all() and (d[targets] > 0).all()):

@@ -27,7 +27,7 @@ __all__ = ["PrepareConfig", "MeshTask", "raw_root", "discover", "read_list", "ma
            "prepare_geometry", "prepare_mesh", "process_task", "STAGES"]
 
 STAGES = ("load", "watertight", "remesh", "simplify", "normalize", "geodesic")
-LIBRARIES = ("trimesh", "manifold3d", "pymeshlab", "fast-simplification", "tvb-gdist", "libigl", "numpy")
+LIBRARIES = ("geogegnn", "trimesh", "manifold3d", "pymeshlab", "fast-simplification", "tvb-gdist", "libigl", "numpy")
 
 
 @dataclass(frozen=True)
@@ -36,7 +36,7 @@ class PrepareConfig:
     target_vertices: int = 5000
     collapse: float = 0.15
     seed: int = 0
-    geodesic_backend: str = "gdist"
+    geodesic_backend: str = "vtp"
     timeout: float = 1800.0  # seconds a mesh may take before it is recorded as failed
 
     def store_params(self) -> dict:

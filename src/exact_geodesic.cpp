@@ -1,0 +1,427 @@
+// Exact polyhedral geodesic distances from one vertex to all vertices by window propagation.
+//
+// A window is an interval [b0, b1] of a half-edge h together with the unfolded position S of the
+// (pseudo-)source that lights it and that source's distance sigma: every point X of the interval is at
+// distance sigma + |S - X| along a straight path in the unfolding (Mitchell-Mount-Papadimitriou;
+// Surazhsky et al. 2005). Windows are kept in the half-edge's frame: its start vertex at the origin, its
+// end vertex on +x, the face it lights (face h / 3) on +y and S on y <= 0.
+//
+// As in Chen-Han / ICH (Xin and Wang 2009) and VTP (Qin et al. 2016), windows are not merged into one
+// partition of each edge (MMP's costly step). Instead a window is cut or dropped wherever a real path is
+// shorter by a relative margin (1e-12), so rounding never removes a shortest path:
+//   1. vertex filter: a window on edge AB is useless when d(A) + |A X| < sigma + |S X| at its far end
+//      from A (|S X| - |A X| only decreases away from A), or the same from B. Every child is checked
+//      against its own edge's two vertices, so the face's three vertices all take part.
+//   2. one angle, two sides: of all windows that crossed h so far, the one with the shortest straight
+//      path to the opposite vertex C crosses h at sp*. A later window whose planar distance to C is longer
+//      cannot reach the far side of the segment sp*-C first: its rays through x < sp* never continue
+//      onto edge BC, nor rays through x > sp* onto edge AC (exchange argument at the crossing point).
+//   3. windows on one half-edge: between two crossings of their distance functions (roots of a
+//      quadratic) one window is shorter throughout; each loses the ends of its interval where the other
+//      is shorter. A middle part is kept, never split.
+// Windows wait in buckets of their smallest distance and leave each bucket first in, first out (the
+// fast wavefront of Xu et al. 2015). Since every rule prunes against real paths, the order only costs
+// time, never exactness; a saddle or boundary vertex lights the edges opposite it again whenever its
+// distance improves after it did so.
+#include <nanobind/nanobind.h>
+#include <nanobind/ndarray.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <stdexcept>
+#include <utility>
+#include <vector>
+
+namespace nb = nanobind;
+
+namespace {
+
+constexpr double INF = std::numeric_limits<double>::infinity();
+constexpr double MARGIN = 1e-12;      // relative: prune only what is worse than a real path by more
+constexpr double BUCKET = 0.05;  // bucket width / mean edge length: 0.02-0.05 fastest, 1.0 is 15% slower
+
+struct Window {
+    int h;
+    double b0, b1, sx, sy, sigma;
+    int next = -1;        // the previous window kept on the same half-edge
+    bool spent = false;   // propagated or dominated: never trimmed again
+    bool dominated = false;
+};
+
+inline double hypot2(double x, double y) { return std::sqrt(x * x + y * y); }
+inline double at(const Window& w, double x) { return w.sigma + hypot2(x - w.sx, w.sy); }
+
+// Where sigma_w + |S_w - x| = sigma_o + |S_o - x| on the x-axis: the real roots of the equation squared
+// twice, which include every root of the equation itself (extra ones only split pieces more finely).
+inline int crossings(const Window& w, const Window& o, double* roots) {
+    const double alpha = o.sigma - w.sigma;
+    const double p = 2.0 * (o.sx - w.sx);
+    const double q = w.sx * w.sx + w.sy * w.sy - o.sx * o.sx - o.sy * o.sy - alpha * alpha;
+    const double a4 = 4.0 * alpha * alpha;
+    const double A = p * p - a4, B = 2.0 * p * q + 2.0 * a4 * o.sx, C = q * q - a4 * (o.sx * o.sx + o.sy * o.sy);
+    const double scale = std::max({std::fabs(A), std::fabs(B), std::fabs(C)});
+    if (scale == 0.0) return 0;
+    if (std::fabs(A) <= 1e-14 * scale) {
+        if (B == 0.0) return 0;
+        roots[0] = -C / B;
+        return 1;
+    }
+    // A double root (equal sigmas) comes out with a slightly negative discriminant: keep it
+    const double disc = std::max(B * B - 4.0 * A * C, 0.0);
+    const double r = -0.5 * (B + std::copysign(std::sqrt(disc), B));  // no cancellation
+    int n = 0;
+    roots[n++] = r / A;
+    if (r != 0.0) roots[n++] = C / r;
+    if (disc > 1e-6 * B * B) return n;
+    for (int i = 0; i < n; ++i)  // squaring costs half the digits near a double root: Newton on the
+        for (int step = 0; step < 2; ++step) {  // unsquared difference gives them back
+            const double x = roots[i], rw = hypot2(x - w.sx, w.sy), ro = hypot2(x - o.sx, o.sy);
+            const double gap = w.sigma + rw - o.sigma - ro, slope = (x - w.sx) / rw - (x - o.sx) / ro;
+            const double y = x - gap / slope;
+            if (!std::isfinite(y) || std::fabs(at(w, y) - at(o, y)) >= std::fabs(gap)) break;
+            roots[i] = y;
+        }
+    return n;
+}
+
+// Events in buckets of distance `width`, first in first out within a bucket (the fast wavefront of
+// Xu et al. 2015): any order is correct here, since every rule prunes against real paths and a vertex
+// that improves lights its edges again; keeping the order only roughly sorted saves a heap's log factor.
+// An id >= 0 is a window, < 0 the vertex -id - 1.
+class BucketQueue {
+public:
+    void reset(double width) {
+        for (auto& b : buckets_) b.clear();
+        width_ = width;
+        current_ = pos_ = 0;
+    }
+    void push(double key, int id) {
+        const size_t b = std::max(current_, static_cast<size_t>(key / width_));
+        if (b >= buckets_.size()) buckets_.resize(b + 1);
+        buckets_[b].push_back(id);
+    }
+    bool pop(int& id) {
+        for (; current_ < buckets_.size(); ++current_, pos_ = 0) {
+            std::vector<int>& b = buckets_[current_];
+            if (pos_ < b.size()) {
+                id = b[pos_++];
+                return true;
+            }
+            b.clear();
+        }
+        return false;
+    }
+
+private:
+    std::vector<std::vector<int>> buckets_;
+    double width_ = 1.0;
+    size_t current_ = 0, pos_ = 0;
+};
+
+inline double cross(double ax, double ay, double bx, double by) { return ax * by - ay * bx; }
+
+// Parameter mu of the point P + mu (Q - P) where the ray from S through (x, 0) meets line PQ, in [0, 1].
+inline double hit(double sx, double sy, double x, double px, double py, double qx, double qy) {
+    const double rx = x - sx, ry = -sy;
+    const double mu = cross(rx, ry, sx - px, sy - py) / cross(rx, ry, qx - px, qy - py);
+    return mu >= 0.0 ? (mu <= 1.0 ? mu : 1.0) : 0.0;  // NaN (ray along the edge) -> 0
+}
+
+class Surface {
+public:
+    Surface(const double* V, int64_t n, const int32_t* F, int64_t m) : n_(n), m_(m), V_(V, V + 3 * n), F_(F, F + 3 * m) {
+        for (int64_t i = 0; i < 3 * m; ++i)
+            if (F_[i] < 0 || F_[i] >= n) throw std::invalid_argument("face index out of range");
+        build_twins();
+        build_frames();
+        build_vertex_faces();
+        d_.resize(n);
+        emitted_.resize(n);
+        double total = 0.0;
+        for (double l : len_) total += l;
+        width_ = BUCKET * total / std::max<size_t>(len_.size(), 1);
+        best_d_.resize(3 * m);
+        best_sp_.resize(3 * m);
+        head_.resize(3 * m);
+    }
+
+    int64_t n_vertices() const { return n_; }
+
+    void distances(int64_t source, double* out) {
+        if (source < 0 || source >= n_) throw std::invalid_argument("source vertex out of range");
+        std::fill(d_.begin(), d_.end(), INF);
+        std::fill(emitted_.begin(), emitted_.end(), INF);
+        std::fill(best_d_.begin(), best_d_.end(), INF);
+        std::fill(head_.begin(), head_.end(), -1);
+        windows_.clear();
+        queue_.reset(width_);
+        source_ = static_cast<int>(source);
+        improve(source_, 0.0);
+        for (int id; queue_.pop(id);) {
+            if (id < 0)
+                settle(-id - 1);
+            else if (!windows_[id].spent) {
+                windows_[id].spent = true;
+                propagate(windows_[id]);
+            }
+        }
+        std::copy(d_.begin(), d_.end(), out);
+    }
+
+private:
+    int64_t n_, m_;
+    std::vector<double> V_;
+    std::vector<int32_t> F_;
+    std::vector<int> twin_;             // per half-edge h = 3 f + k (F[h] -> F[next(h)]): its twin or -1
+    std::vector<double> len_, cx_, cy_;  // per half-edge: length, opposite vertex in its frame (cy >= 0)
+    std::vector<char> pseudo_;          // per vertex: saddle (angle sum >= 2 pi) or on the boundary
+    std::vector<int> vf_start_, vf_;    // faces around each vertex (CSR), as half-edges leaving it
+    // per source
+    std::vector<double> d_, best_d_, best_sp_;
+    std::vector<double> emitted_;  // per vertex: the distance at which it last lit its edges
+    double width_ = 1.0;
+    std::vector<Window> windows_;
+    std::vector<int> head_;  // per half-edge: the last window kept on it (-1: none)
+    BucketQueue queue_;
+    int source_ = 0;
+
+    static int next(int h) { return h % 3 == 2 ? h - 2 : h + 1; }
+    static int prev(int h) { return h % 3 == 0 ? h + 2 : h - 1; }
+
+    void build_twins() {
+        std::vector<std::pair<std::pair<int, int>, int>> keys(3 * m_);
+        for (int h = 0; h < 3 * m_; ++h) {
+            const int a = F_[h], b = F_[next(h)];
+            keys[h] = {{std::min(a, b), std::max(a, b)}, h};
+        }
+        std::sort(keys.begin(), keys.end());
+        twin_.assign(3 * m_, -1);
+        for (size_t i = 0; i + 1 < keys.size(); ++i) {
+            if (keys[i].first != keys[i + 1].first) continue;
+            const bool lone = (i + 2 >= keys.size() || keys[i + 2].first != keys[i].first) &&
+                              (i == 0 || keys[i - 1].first != keys[i].first);
+            if (lone) {  // exactly two half-edges: a manifold edge (more: left as boundary, never paired)
+                twin_[keys[i].second] = keys[i + 1].second;
+                twin_[keys[i + 1].second] = keys[i].second;
+            }
+        }
+    }
+
+    void build_frames() {
+        len_.resize(3 * m_);
+        cx_.resize(3 * m_);
+        cy_.resize(3 * m_);
+        std::vector<double> angle_sum(n_, 0.0);
+        pseudo_.assign(n_, 0);
+        for (int h = 0; h < 3 * m_; ++h) {
+            const double* a = &V_[3 * F_[h]];
+            const double* b = &V_[3 * F_[next(h)]];
+            const double* c = &V_[3 * F_[prev(h)]];
+            double u[3], w[3];
+            for (int i = 0; i < 3; ++i) u[i] = b[i] - a[i], w[i] = c[i] - a[i];
+            const double L = hypot2(hypot2(u[0], u[1]), u[2]);
+            const double x = L > 0.0 ? (u[0] * w[0] + u[1] * w[1] + u[2] * w[2]) / L : 0.0;
+            const double cw = w[0] * w[0] + w[1] * w[1] + w[2] * w[2];
+            len_[h] = L;
+            cx_[h] = x;
+            cy_[h] = std::sqrt(std::max(cw - x * x, 0.0));
+            angle_sum[F_[h]] += std::atan2(cy_[h], x);  // the corner angle at the start vertex
+            if (twin_[h] < 0) pseudo_[F_[h]] = pseudo_[F_[next(h)]] = 1;
+        }
+        for (int64_t v = 0; v < n_; ++v)
+            if (angle_sum[v] >= 2.0 * M_PI * (1.0 - 1e-9)) pseudo_[v] = 1;  // flat ones too: harmless
+    }
+
+    void build_vertex_faces() {
+        vf_start_.assign(n_ + 1, 0);
+        for (int h = 0; h < 3 * m_; ++h) ++vf_start_[F_[h] + 1];
+        for (int64_t v = 0; v < n_; ++v) vf_start_[v + 1] += vf_start_[v];
+        vf_.resize(3 * m_);
+        std::vector<int> fill(vf_start_.begin(), vf_start_.end() - 1);
+        for (int h = 0; h < 3 * m_; ++h) vf_[fill[F_[h]]++] = h;
+    }
+
+    void improve(int v, double dist) {
+        if (dist < d_[v]) {
+            d_[v] = dist;
+            if (pseudo_[v] || v == source_) queue_.push(dist, -v - 1);
+        }
+    }
+
+    // A vertex's distance is final: a source or pseudo-source lights the edges opposite it.
+    void settle(int v) {
+        if (d_[v] >= emitted_[v]) return;
+        emitted_[v] = d_[v];
+        const double* p = &V_[3 * v];
+        for (int i = vf_start_[v]; i < vf_start_[v + 1]; ++i) {
+            const int h = vf_[i];  // leaves v in its face; the edge opposite v is next(h)
+            for (const int q : {F_[next(h)], F_[prev(h)]}) {  // both neighbours, for boundary vertices
+                const double* pq = &V_[3 * q];
+                improve(q, d_[v] + hypot2(hypot2(pq[0] - p[0], pq[1] - p[1]), pq[2] - p[2]));
+            }
+            const int e = next(h);
+            // v in e's frame is its opposite vertex (cx, cy); the window lights the face across e
+            emit_child(e, 0.0, 0.0, len_[e], 0.0, cx_[e], cy_[e], cx_[e], cy_[e], 0.0, 0.0, len_[e], 0.0, d_[v]);
+        }
+    }
+
+    // The window that continues across half-edge e of the current face, given in the current frame:
+    // e runs from P to Q, T is the face's third vertex, S the source, X0 and X1 the ends of the lit part.
+    void emit_child(int e, double px, double py, double qx, double qy, double tx, double ty, double sx,
+                    double sy, double x0x, double x0y, double x1x, double x1y, double sigma) {
+        const int t = twin_[e];
+        if (t < 0) return;
+        // t's frame: origin at t's start vertex, +x along t, the current face on -y
+        const bool start_at_q = F_[t] == F_[next(e)];
+        const double ox = start_at_q ? qx : px, oy = start_at_q ? qy : py;
+        const double ex = start_at_q ? px : qx, ey = start_at_q ? py : qy;
+        const double L = len_[t];
+        if (!(L > 0.0)) return;
+        const double ux = (ex - ox) / L, uy = (ey - oy) / L;
+        // -y is toward the current face's third vertex (S lies on that side too, or on the line)
+        double nx = -uy, ny = ux;
+        if (cross(ux, uy, tx - ox, ty - oy) > 0.0) nx = uy, ny = -ux;
+        auto fx = [&](double x, double y) { return (x - ox) * ux + (y - oy) * uy; };
+        auto fy = [&](double x, double y) { return (x - ox) * nx + (y - oy) * ny; };
+        double s0 = fx(x0x, x0y), s1 = fx(x1x, x1y);
+        if (s0 > s1) std::swap(s0, s1);
+        s0 = std::max(s0, 0.0);
+        s1 = std::min(s1, L);
+        if (s1 <= s0) return;
+        add_window({t, s0, s1, fx(sx, sy), std::min(fy(sx, sy), 0.0), sigma});
+    }
+
+    // Cut the start or end of [b0, b1] where the other window is shorter by more than the margin (a
+    // dominated middle part stays). Returns false when nothing is left.
+    static bool cut_dominated(Window& w, const double* cut, const bool* worse, int k) {
+        double keep0 = w.b0, keep1 = w.b1;
+        for (int i = 0; i < k && worse[i] && cut[i] <= keep0; ++i) keep0 = cut[i + 1];
+        for (int i = k - 1; i >= 0 && worse[i] && cut[i + 1] >= keep1; --i) keep1 = cut[i];
+        if (keep1 <= keep0) return false;
+        w.b0 = keep0;
+        w.b1 = keep1;
+        return true;
+    }
+
+    // Two windows on one half-edge: between two crossings of their distance functions one is shorter
+    // throughout (tested in the middle); each loses the ends where the other is shorter. Returns false
+    // when nothing of w is left; o, if it may still change, is marked spent when nothing of it is left.
+    static bool contest(Window& w, Window& o) {
+        const double lo = std::max(w.b0, o.b0), hi = std::min(w.b1, o.b1);
+        if (hi <= lo) return true;
+        double cut[4] = {lo, 0.0, 0.0, 0.0}, roots[2];
+        int k = 1;
+        for (int i = 0, n = crossings(w, o, roots); i < n; ++i)
+            if (roots[i] > lo && roots[i] < hi) cut[k++] = roots[i];
+        std::sort(cut + 1, cut + k);
+        cut[k] = hi;
+        bool w_worse[3], o_worse[3];
+        for (int i = 0; i < k; ++i) {
+            const double mid = 0.5 * (cut[i] + cut[i + 1]), dw = at(w, mid), dout = at(o, mid);
+            w_worse[i] = dw > dout * (1.0 + MARGIN);
+            o_worse[i] = dout > dw * (1.0 + MARGIN);
+        }
+        if (!o.spent && !cut_dominated(o, cut, o_worse, k)) o.spent = o.dominated = true;
+        return cut_dominated(w, cut, w_worse, k);
+    }
+
+    // Rule 1: longer at its far end from A than the path through A, or the same for B.
+    bool useless(const Window& w) const {
+        const double L = len_[w.h];
+        return at(w, w.b1) > (d_[F_[w.h]] + w.b1) * (1.0 + MARGIN) ||
+               at(w, w.b0) > (d_[F_[next(w.h)]] + L - w.b0) * (1.0 + MARGIN);
+    }
+
+    // Vertex filter and trimming against the windows already on the edge; then keep the window and give
+    // its edge's vertices the paths through its ends.
+    void add_window(Window w) {
+        if (useless(w)) return;
+        for (int* link = &head_[w.h]; *link >= 0;) {
+            Window& o = windows_[*link];
+            if (!contest(w, o)) return;
+            if (o.dominated)
+                *link = o.next;  // nothing left of it to compare with
+            else
+                link = &o.next;
+        }
+        if (useless(w)) return;
+        const double to0 = at(w, w.b0), to1 = at(w, w.b1);
+        improve(F_[w.h], to0 + w.b0);
+        improve(F_[next(w.h)], to1 + len_[w.h] - w.b1);
+        const double near = w.sx < w.b0 ? to0 : (w.sx > w.b1 ? to1 : w.sigma - w.sy);
+        w.next = head_[w.h];
+        head_[w.h] = static_cast<int>(windows_.size());
+        windows_.push_back(w);
+        queue_.push(near, head_[w.h]);
+    }
+
+    void propagate(const Window w) {  // a copy: children are appended to windows_
+        const int h = w.h;
+        const int a = F_[h], b = F_[next(h)], c = F_[prev(h)];
+        const double L = len_[h], cx = cx_[h], cy = cy_[h];
+        if (cy <= 0.0 || useless(w)) return;  // a degenerate face lights nothing
+        const double to0 = at(w, w.b0), to1 = at(w, w.b1);
+        // where the ray from S to C crosses the edge, and the distance to C through the window
+        const double sp = w.sx - w.sy * (cx - w.sx) / (cy - w.sy);
+        const double planar = w.sigma + hypot2(cx - w.sx, cy - w.sy);
+        double to_c;
+        if (sp < w.b0)
+            to_c = to0 + hypot2(cx - w.b0, cy);
+        else if (sp > w.b1)
+            to_c = to1 + hypot2(cx - w.b1, cy);
+        else
+            to_c = planar;
+        improve(c, to_c);
+        double left_end = std::min(w.b1, sp), right_start = std::max(w.b0, sp);
+        if (sp >= w.b0 && sp <= w.b1 && planar < best_d_[h]) {
+            best_d_[h] = planar;
+            best_sp_[h] = sp;
+        } else if (planar > best_d_[h] * (1.0 + MARGIN)) {
+            left_end = std::min(left_end, best_sp_[h]);
+            right_start = std::max(right_start, best_sp_[h]);
+        }
+        if (left_end > w.b0) {  // rays onto edge C -> A (prev(h)), from A's side
+            const double m0 = hit(w.sx, w.sy, w.b0, 0.0, 0.0, cx, cy);
+            const double m1 = hit(w.sx, w.sy, left_end, 0.0, 0.0, cx, cy);
+            emit_child(prev(h), cx, cy, 0.0, 0.0, L, 0.0, w.sx, w.sy, m0 * cx, m0 * cy, m1 * cx, m1 * cy, w.sigma);
+        }
+        if (right_start < w.b1) {  // rays onto edge B -> C (next(h))
+            const double m0 = hit(w.sx, w.sy, right_start, L, 0.0, cx, cy);
+            const double m1 = hit(w.sx, w.sy, w.b1, L, 0.0, cx, cy);
+            emit_child(next(h), L, 0.0, cx, cy, 0.0, 0.0, w.sx, w.sy, L + m0 * (cx - L), m0 * cy, L + m1 * (cx - L),
+                       m1 * cy, w.sigma);
+        }
+    }
+};
+
+using Vertices = nb::ndarray<const double, nb::shape<-1, 3>, nb::c_contig, nb::device::cpu>;
+using Faces = nb::ndarray<const int32_t, nb::shape<-1, 3>, nb::c_contig, nb::device::cpu>;
+using Sources = nb::ndarray<const int64_t, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
+
+}  // namespace
+
+NB_MODULE(_exact_geodesic, m) {
+    m.doc() = "Exact polyhedral geodesic distances by window propagation (see src/exact_geodesic.cpp).";
+    nb::class_<Surface>(m, "Surface")
+        .def(
+            "__init__",
+            [](Surface* self, Vertices V, Faces F) { new (self) Surface(V.data(), V.shape(0), F.data(), F.shape(0)); },
+            nb::arg("vertices"), nb::arg("faces"),
+            "Precompute a mesh: vertices (N, 3) float64 and faces (M, 3) int32, both C-contiguous.")
+        .def(
+            "distances",
+            [](Surface& self, Sources sources) {
+                const size_t k = sources.shape(0), n = static_cast<size_t>(self.n_vertices());
+                double* out = new double[k * n];
+                nb::capsule owner(out, [](void* p) noexcept { delete[] static_cast<double*>(p); });
+                {
+                    nb::gil_scoped_release release;
+                    for (size_t i = 0; i < k; ++i) self.distances(sources.data()[i], out + i * n);
+                }
+                return nb::ndarray<nb::numpy, double, nb::ndim<2>>(out, {k, n}, owner);
+            },
+            nb::arg("sources"),
+            "Distances (len(sources), N) float64 from each source vertex to every vertex; inf where unreached.");
+}
