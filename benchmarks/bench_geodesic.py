@@ -1,55 +1,116 @@
-"""Pairs stage: tvb-gdist against libigl's exact_geodesic (the reference), measured in the same run.
+"""Pairs stage: the vtp solver against tvb-gdist and libigl's exact_geodesic, measured in the same run.
 
-    python benchmarks/bench_geodesic.py [--meshes 3] [--pairs 600000] [--sources N]
+    python benchmarks/bench_geodesic.py [--meshes NAME ...] [--pairs 600000] [--sources 8]
 
-Each mesh goes through the pipeline's stages first (so it is what the pairs stage really sees),
-then both backends compute the same sources; the distances must agree to within one float32 ulp
-(1.2e-7 relative), the precision the store keeps. With --sources the
-per-source times are measured on N sources and scaled to the pairs count (libigl is slow).
+Each mesh of ../shared/meshes/train goes through the pipeline's stages first (what the pairs stage
+really sees, ~5k vertices); the first one is also Loop-subdivided to ~20k and ~80k vertices. Every
+backend computes the same sources, timed per source as the pipeline calls it (vtp prepares the mesh
+once per mesh, gdist rebuilds it per call) and scaled to the sources that --pairs needs. Peak memory is
+the growth of the maximum resident set of a forked child that runs one backend on one mesh. Distances
+must agree to 1e-9 relative with the shorter of libigl and gdist, except where vtp is shorter than both
+and potpourri3d's edge-flip geodesic finds a path as short (Kirsanov's code is then wrong: counted in
+the last column).
 """
 from __future__ import annotations
 
 import argparse
+import multiprocessing
+import resource
 import time
 from pathlib import Path
 
 import numpy as np
 
-from geodata.geodesic import exact_geodesic_distances, sample_sources
-from geodata.mesh import vertex_components
-from geodata.prepare import PrepareConfig, prepare_mesh
+from geodata.geodesic import BACKENDS, geodesic_solver, sample_sources
+from geodata.mesh import Mesh, vertex_components
+from geodata.prepare import PrepareConfig, prepare_geometry
+from geodata.stages.load import load_mesh_bytes
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "meshes" / "train"
 DEFAULT = ["sweethome3d/armchair.obj", "sweethome3d/lamp.obj", "trimesh-models/featuretype.STL"]
+
+
+def timed_run(mesh: Mesh, backend: str, sources: np.ndarray, out) -> None:
+    """In a forked child: seconds per source, peak RSS growth (MiB) and the distances."""
+    base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    start = time.perf_counter()
+    solve = geodesic_solver(mesh, backend)
+    d = np.stack([solve(int(s)) for s in sources])
+    seconds = (time.perf_counter() - start) / len(sources)
+    peak = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - base) / 1024
+    out.send((seconds, peak, d))
+
+
+def measure(mesh: Mesh, backend: str, sources: np.ndarray):
+    ctx = multiprocessing.get_context("fork")
+    recv, send = ctx.Pipe(duplex=False)
+    child = ctx.Process(target=timed_run, args=(mesh, backend, sources, send))
+    child.start()
+    result = recv.recv()
+    child.join()
+    return result
+
+
+def loop_subdivide(mesh: Mesh, times: int) -> Mesh:
+    import trimesh
+
+    tm = trimesh.Trimesh(mesh.vertices, mesh.faces, process=False)
+    for _ in range(times):
+        tm = tm.subdivide_loop(1)
+    return Mesh(np.asarray(tm.vertices, dtype=np.float64), np.asarray(tm.faces, dtype=np.int64))
+
+
+def compare(mesh: Mesh, sources, d, ref) -> tuple[float, int, float]:
+    """Max relative difference where vtp agrees, and the count and largest gap of vertices where vtp is
+    shorter than the reference by more than 1e-9 and an edge-flip path confirms it."""
+    import potpourri3d as pp3d
+
+    labels = vertex_components(mesh)
+    flip = pp3d.EdgeFlipGeodesicSolver(mesh.vertices, mesh.faces)
+    worst, n_wrong, gap = 0.0, 0, 0.0
+    for s, a, b in zip(sources, d, ref):
+        part = labels == labels[s]
+        rel = np.where(part, (a - b) / np.maximum(b, 1e-300), 0.0)
+        for t in np.flatnonzero(rel < -1e-9):
+            path = flip.find_geodesic_path(int(s), int(t), max_iterations=100000, max_relative_length_decrease=0.0)
+            length = np.linalg.norm(np.diff(path, axis=0), axis=1).sum()
+            assert length <= a[t] * (1 + 1e-9), f"vtp shorter than any path found: {a[t]} < {length}"
+            n_wrong, gap, rel[t] = n_wrong + 1, max(gap, -rel[t]), 0.0
+        worst = max(worst, float(np.abs(rel).max()))
+    return worst, n_wrong, gap
 
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--meshes", nargs="*", default=DEFAULT, help="paths under shared/meshes/train")
     ap.add_argument("--pairs", type=int, default=600_000)
-    ap.add_argument("--sources", type=int, default=None, help="time only this many sources and scale up")
+    ap.add_argument("--sources", type=int, default=8, help="sources timed per mesh at ~5k vertices "
+                                                          "(half at 20k, a quarter at 80k, at least 2)")
     args = ap.parse_args()
-    config = PrepareConfig(pairs=1)
-    print(f"{'mesh':34s} {'verts':>6s} {'sources':>7s} {'gdist s':>8s} {'libigl s':>9s} {'ratio':>6s} {'max rel diff':>12s}")
-    ratios = []
-    for name in args.meshes:
-        mesh, *_ = prepare_mesh((SHARED / name).read_bytes(), Path(name).suffix, config, np.random.default_rng(0))
+    cases = []
+    for i, name in enumerate(args.meshes):
+        path = SHARED / name
+        mesh = prepare_geometry(load_mesh_bytes(path.read_bytes(), path.suffix), PrepareConfig())
+        cases.append((name, mesh, args.sources))
+        if i == 0:
+            cases += [(f"{name} x Loop {k}", loop_subdivide(mesh, k), max(2, args.sources // 2 ** k))
+                      for k in (1, 2)]
+    print(f"{'mesh':42s} {'verts':>6s} {'sources':>7s} " + " ".join(f"{b + ' s':>9s}" for b in BACKENDS)
+          + f" {'vs libigl':>9s} {'vs gdist':>8s} " + " ".join(f"{b + ' MiB':>10s}" for b in BACKENDS)
+          + f" {'max rel diff':>12s} {'reference wrong':>15s}")
+    for name, mesh, n_timed in cases:
         sources = sample_sources(vertex_components(mesh), args.pairs, np.random.default_rng(0))
-        timed = sources if args.sources is None else sources[: args.sources]
-        seconds, results = {}, {}
-        for backend in ("gdist", "libigl"):
-            t = time.perf_counter()
-            results[backend] = [exact_geodesic_distances(mesh, int(s), backend) for s in timed]
-            seconds[backend] = (time.perf_counter() - t) * len(sources) / len(timed)
-        # Agreement is ~4e-15 at almost every vertex; one or two vertices of some sources differ by up
-        # to ~8e-8 relative (floating-point order of window propagation), under one ulp of the float32
-        # the store keeps.
-        diff = max((np.abs(a - b) / np.maximum(b, 1e-12)).max() for a, b in zip(results["gdist"], results["libigl"]))
-        assert diff < np.finfo(np.float32).eps, f"backends disagree on {name}: {diff}"
-        ratios.append(seconds["libigl"] / seconds["gdist"])
-        print(f"{name:34s} {mesh.n_vertices:6d} {len(sources):7d} {seconds['gdist']:8.2f} "
-              f"{seconds['libigl']:9.2f} {ratios[-1]:5.2f}x {diff:12.1e}")
-    print(f"pairs stage speed-up over libigl (geometric mean): {np.exp(np.mean(np.log(ratios))):.2f}x")
+        timed = sources[:n_timed]
+        results = {b: measure(mesh, b, timed) for b in BACKENDS}
+        total = {b: results[b][0] * len(sources) for b in BACKENDS}
+        reference = np.minimum(results["libigl"][2], results["gdist"][2])
+        diff, n_wrong, gap = compare(mesh, timed, results["vtp"][2], reference)
+        assert diff <= 1e-9, f"vtp differs from the reference on {name}: {diff}"
+        print(f"{name:42s} {mesh.n_vertices:6d} {len(sources):7d} "
+              + " ".join(f"{total[b]:9.2f}" for b in BACKENDS)
+              + f" {total['libigl'] / total['vtp']:8.2f}x {total['gdist'] / total['vtp']:7.2f}x "
+              + " ".join(f"{results[b][1]:10.1f}" for b in BACKENDS) + f" {diff:12.1e} "
+              + (f"{n_wrong:4d} by {gap:.1e}" if n_wrong else f"{0:15d}"))
 
 
 if __name__ == "__main__":

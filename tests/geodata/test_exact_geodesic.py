@@ -29,17 +29,32 @@ def vtp(mesh, source):
 def assert_equal_to_libigl(mesh, sources):
     """Equal to 1e-9 relative within the source's part (other parts: inf here, 0 from libigl).
 
-    libigl and tvb-gdist run the same Kirsanov code, yet on a few vertices of some sources they differ by
-    up to 1e-8 relative (floating-point order); both give lengths of real paths, so the shorter of the
-    two is the reference there. Never longer than libigl: no shortest path is missed.
+    libigl and tvb-gdist run the same Kirsanov code. On a few vertices of some sources it differs from
+    itself by up to 1e-8 relative, and on some meshes it is longer than the true distance (by 1.5e-4 on a
+    subdivided CAD part). Where vtp is shorter than both, potpourri3d's edge-flip geodesic (an
+    independent code) must find a surface path as short: then vtp's value is a real path's length.
+    Never longer than the shorter reference: no shortest path is missed.
     """
     labels = vertex_components(mesh)
     for s in sources:
         part = labels == labels[s]
-        d, ref = vtp(mesh, s), libigl(mesh, s)
+        d = vtp(mesh, s)
         assert np.isinf(d[~part]).all()
-        best = np.minimum(ref, geodesic_solver(mesh, "gdist")(s))[part]
-        np.testing.assert_allclose(d[part], best, rtol=RTOL, atol=0, err_msg=f"source {s}")
+        best = np.minimum(libigl(mesh, s), geodesic_solver(mesh, "gdist")(s))
+        shorter = part & (d < best * (1 - RTOL))
+        assert (d[shorter] >= flipout_lengths(mesh, s, np.flatnonzero(shorter)) * (1 - RTOL)).all()
+        keep = part & ~shorter
+        np.testing.assert_allclose(d[keep], best[keep], rtol=RTOL, atol=0, err_msg=f"source {s}")
+
+
+def flipout_lengths(mesh, source, targets):
+    """Lengths of potpourri3d's locally shortest (edge-flip) paths: real surface paths, so upper bounds."""
+    import potpourri3d as pp3d
+
+    solver = pp3d.EdgeFlipGeodesicSolver(mesh.vertices, mesh.faces)
+    return np.array([np.linalg.norm(np.diff(solver.find_geodesic_path(int(source), int(t), max_iterations=100000,
+                                                                      max_relative_length_decrease=0.0),
+                                            axis=0), axis=1).sum() for t in targets])
 
 
 def grid(n, jitter=0.0, height=0.0, seed=0, keep=None):
