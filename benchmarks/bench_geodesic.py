@@ -1,6 +1,6 @@
 """Pairs stage: the vtp solver against tvb-gdist and libigl's exact_geodesic, measured in the same run.
 
-    python benchmarks/bench_geodesic.py [--meshes NAME ...] [--pairs 600000] [--sources 8]
+    python benchmarks/bench_geodesic.py [--meshes NAME ...] [--pairs 600000] [--sources 8] [--subdivide 2]
 
 Each mesh of ../shared/meshes/train goes through the pipeline's stages first (what the pairs stage
 really sees, ~5k vertices); the first one is also Loop-subdivided to ~20k and ~80k vertices. Every
@@ -84,6 +84,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--meshes", nargs="*", default=DEFAULT, help="paths under shared/meshes/train")
     ap.add_argument("--pairs", type=int, default=600_000)
+    ap.add_argument("--subdivide", type=int, default=2, help="Loop-subdivide the first mesh 1..K times")
     ap.add_argument("--sources", type=int, default=8, help="sources timed per mesh at ~5k vertices "
                                                           "(half at 20k, a quarter at 80k, at least 2)")
     args = ap.parse_args()
@@ -94,7 +95,7 @@ def main():
         cases.append((name, mesh, args.sources))
         if i == 0:
             cases += [(f"{name} x Loop {k}", loop_subdivide(mesh, k), max(2, args.sources // 2 ** k))
-                      for k in (1, 2)]
+                      for k in range(1, args.subdivide + 1)]
     print(f"{'mesh':42s} {'verts':>6s} {'sources':>7s} " + " ".join(f"{b + ' s':>9s}" for b in BACKENDS)
           + f" {'vs libigl':>9s} {'vs gdist':>8s} " + " ".join(f"{b + ' MiB':>10s}" for b in BACKENDS)
           + f" {'max rel diff':>12s} {'reference wrong':>15s}")

@@ -231,7 +231,7 @@ private:
             if (twin_[h] < 0) pseudo_[F_[h]] = pseudo_[F_[next(h)]] = 1;
         }
         for (int64_t v = 0; v < n_; ++v)
-            if (angle_sum[v] >= 2.0 * M_PI * (1.0 - 1e-9)) pseudo_[v] = 1;  // flat ones too: harmless
+            if (angle_sum[v] > 2.0 * M_PI * (1.0 + 1e-9)) pseudo_[v] = 1;  // a geodesic passes a flat vertex straight
     }
 
     void build_vertex_faces() {
