@@ -86,7 +86,7 @@ def test_sigkill_loses_nothing_and_rerun_finishes_exactly_the_rest(reference, ra
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     deadline = time.monotonic() + 300
     while time.monotonic() < deadline:  # kill the whole process group once the first mesh is committed
-        if out.exists() and any(a and a.get("status") == "ok" for a in store.list_meshes(out).values()):
+        if (out / "meshes").exists() and any(a and a.get("status") == "ok" for a in store.list_meshes(out).values()):
             break
         time.sleep(0.05)
     os.killpg(proc.pid, signal.SIGKILL)
