@@ -176,7 +176,7 @@ private:
     std::vector<int32_t> F_;
     std::vector<int> twin_;             // per half-edge h = 3 f + k (F[h] -> F[next(h)]): its twin or -1
     std::vector<double> len_, cx_, cy_;  // per half-edge: length, opposite vertex in its frame (cy >= 0)
-    std::vector<char> pseudo_;          // per vertex: saddle (angle sum >= 2 pi) or on the boundary
+    std::vector<char> pseudo_;          // per vertex: saddle (angle sum > 2 pi) or on the boundary
     std::vector<int> vf_start_, vf_;    // faces around each vertex (CSR), as half-edges leaving it
     // per source
     std::vector<double> d_, best_d_, best_sp_;
@@ -254,13 +254,10 @@ private:
     void settle(int v) {
         if (d_[v] >= emitted_[v]) return;
         emitted_[v] = d_[v];
-        const double* p = &V_[3 * v];
         for (int i = vf_start_[v]; i < vf_start_[v + 1]; ++i) {
             const int h = vf_[i];  // leaves v in its face; the edge opposite v is next(h)
-            for (const int q : {F_[next(h)], F_[prev(h)]}) {  // both neighbours, for boundary vertices
-                const double* pq = &V_[3 * q];
-                improve(q, d_[v] + hypot2(hypot2(pq[0] - p[0], pq[1] - p[1]), pq[2] - p[2]));
-            }
+            improve(F_[next(h)], d_[v] + len_[h]);  // both neighbours, for boundary vertices
+            improve(F_[prev(h)], d_[v] + len_[prev(h)]);
             const int e = next(h);
             // v in e's frame is its opposite vertex (cx, cy); the window lights the face across e
             emit_child(e, 0.0, 0.0, len_[e], 0.0, cx_[e], cy_[e], cx_[e], cy_[e], 0.0, 0.0, len_[e], 0.0, d_[v]);
@@ -328,16 +325,16 @@ private:
     }
 
     // Rule 1: longer at its far end from A than the path through A, or the same for B.
-    bool useless(const Window& w) const {
-        const double L = len_[w.h];
-        return at(w, w.b1) > (d_[F_[w.h]] + w.b1) * (1.0 + MARGIN) ||
-               at(w, w.b0) > (d_[F_[next(w.h)]] + L - w.b0) * (1.0 + MARGIN);
+    // to0, to1: the window's distances at b0 and b1.
+    bool useless(const Window& w, double to0, double to1) const {
+        return to1 > (d_[F_[w.h]] + w.b1) * (1.0 + MARGIN) ||
+               to0 > (d_[F_[next(w.h)]] + len_[w.h] - w.b0) * (1.0 + MARGIN);
     }
 
     // Vertex filter and trimming against the windows already on the edge; then keep the window and give
     // its edge's vertices the paths through its ends.
     void add_window(Window w) {
-        if (useless(w)) return;
+        if (useless(w, at(w, w.b0), at(w, w.b1))) return;
         for (int* link = &head_[w.h]; *link >= 0;) {
             Window& o = windows_[*link];
             if (!contest(w, o)) return;
@@ -346,8 +343,8 @@ private:
             else
                 link = &o.next;
         }
-        if (useless(w)) return;
         const double to0 = at(w, w.b0), to1 = at(w, w.b1);
+        if (useless(w, to0, to1)) return;
         improve(F_[w.h], to0 + w.b0);
         improve(F_[next(w.h)], to1 + len_[w.h] - w.b1);
         const double near = w.sx < w.b0 ? to0 : (w.sx > w.b1 ? to1 : w.sigma - w.sy);
@@ -361,8 +358,8 @@ private:
         const int h = w.h;
         const int a = F_[h], b = F_[next(h)], c = F_[prev(h)];
         const double L = len_[h], cx = cx_[h], cy = cy_[h];
-        if (cy <= 0.0 || useless(w)) return;  // a degenerate face lights nothing
         const double to0 = at(w, w.b0), to1 = at(w, w.b1);
+        if (cy <= 0.0 || useless(w, to0, to1)) return;  // a degenerate face lights nothing
         // where the ray from S to C crosses the edge, and the distance to C through the window
         const double sp = w.sx - w.sy * (cx - w.sx) / (cy - w.sy);
         const double planar = w.sigma + hypot2(cx - w.sx, cy - w.sy);
