@@ -9,11 +9,16 @@ import click
 
 from .model import GeGnnConfig
 
+MODEL_ARG = dict(nargs=-1, required=True, type=click.Path(dir_okay=False), metavar="[CHECKPOINT|NAME] MESH")
+PRETRAINED_HELP = ("Use a model shipped in the package instead of CHECKPOINT: the most accurate one, or NAME "
+                   "('landmark', 'paper').")
+
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
 @click.version_option(package_name="geogegnn")
 def main():
-    """Learned geodesic embeddings (GeGnn): train on a geodata store, evaluate, query.
+    """Learned geodesic embeddings (GeGnn): train on a geodata store, evaluate, query, and the paper's
+    applications (finetune, geodesic paths, texture mapping, shape distributions).
 
     \b
     Typical use:
@@ -21,6 +26,10 @@ def main():
       gegnn eval runs/a/best.safetensors out/
       gegnn query runs/a/best.safetensors mesh.obj --source 0 -o field.ply
       gegnn query --pretrained mesh.obj --source 0 --exact -o field.png
+      gegnn query --pretrained mesh.obj --source 0 --path 99 -o path.png
+      gegnn finetune --pretrained mesh.obj -o tuned.safetensors
+      gegnn texture --pretrained mesh.obj --center 0 -o textured.png
+      gegnn shape-distribution --pretrained a.obj b.obj -o d2.png
       torchrun --nproc-per-node 4 -m gegnn.cli train out/ --run-dir runs/a
     """
 
@@ -127,31 +136,32 @@ def evaluate(checkpoint, store, distance, device, csv_path):
 
 
 @main.command(context_settings={"max_content_width": 100})
-@click.argument("files", nargs=-1, required=True, type=click.Path(dir_okay=False),
-                metavar="[CHECKPOINT|NAME] MESH")
-@click.option("--pretrained", is_flag=True,
-              help="Use a model shipped in the package instead of CHECKPOINT: the most accurate one, or "
-                   "NAME ('landmark', 'paper').")
+@click.argument("files", **MODEL_ARG)
+@click.option("--pretrained", is_flag=True, help=PRETRAINED_HELP)
 @click.option("--source", type=int, help="Source vertex index (the file's own numbering).")
 @click.option("--pairs", "pairs_csv", type=click.Path(exists=True, dir_okay=False),
               help="Answer the pairs of this CSV (two integer columns i,j; a header is allowed).")
 @click.option("-o", "--output", type=click.Path(dir_okay=False),
               help="With --source: field.npy (per file vertex), field.ply (colored mesh) or field.png "
                    "(rendered). With --pairs: a CSV i,j,distance (default: stdout).")
-@click.option("--exact", is_flag=True, help="Also compute the exact field (tvb-gdist) and report the error; "
-                                            "a PNG shows predicted | exact | relative error.")
+@click.option("--exact", is_flag=True, help="Also compute the exact field (geodata's exact solver) and report "
+                                            "the error; a PNG shows predicted | exact | relative error.")
+@click.option("--path", "path_to", type=int, metavar="J",
+              help="Trace the geodesic path from --source to vertex J on the predicted field (a PNG draws "
+                   "it); with --exact also potpourri3d's exact edge-flip path, and the lengths of both.")
 @click.option("--prepare", is_flag=True, help="Run the geodata pipeline first (watertight, remesh to ~5k "
                                               "vertices: the meshes the model was trained on).")
 @click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True)
 @click.option("--precision", type=click.Choice(["fp32", "bf16"]), default="fp32", show_default=True,
               help="Network precision (bf16: faster on recent CPUs and GPUs).")
-def query(files, pretrained, source, pairs_csv, output, exact, prepare, device, precision):
+def query(files, pretrained, source, pairs_csv, output, exact, path_to, prepare, device, precision):
     """Geodesic distances on MESH (OBJ/OFF/PLY/STL/GLB, any units) predicted by CHECKPOINT or --pretrained.
 
     \b
     Examples:
       gegnn query --pretrained bunny.obj --source 0 -o field.png
       gegnn query --pretrained bunny.obj --source 0 --exact -o compare.png
+      gegnn query --pretrained bunny.obj --source 0 --path 1234 --exact -o path.png
       gegnn query --pretrained paper bunny.obj --source 0 --exact -o compare.png
       gegnn query runs/a/best.safetensors bunny.obj --pairs pairs.csv -o distances.csv
 
@@ -162,33 +172,19 @@ def query(files, pretrained, source, pairs_csv, output, exact, prepare, device, 
 
     from geodata.mesh import MeshError
 
-    from .model import PRETRAINED, GeGnn
-    from .query import load_query_mesh, read_pairs
+    from .query import read_pairs
 
-    if len(files) > 2 or (not pretrained and len(files) != 2):
-        raise click.UsageError("give CHECKPOINT MESH, or --pretrained [NAME] MESH")
-    if pretrained and len(files) == 2 and files[0] not in PRETRAINED:
-        raise click.UsageError(f"no pretrained model {files[0]!r}; shipped: {', '.join(PRETRAINED)}")
-    for path in (files[-1:] if pretrained else files):
-        if not Path(path).is_file():
-            raise click.BadParameter(f"{path}: no such file", param_hint="[CHECKPOINT] MESH")
+    model_spec, (mesh_path,) = _model_and_meshes(files, pretrained)
     if (source is None) == (pairs_csv is None):
         raise click.UsageError("give one of --source or --pairs")
     if exact and pairs_csv:
         raise click.UsageError("--exact goes with --source (it compares whole fields)")
-    mesh_path = files[-1]
-    suffix = Path(output).suffix.lower() if output else ""
-    allowed = (".csv",) if pairs_csv else (".npy", ".ply", ".png")
-    if output and suffix not in allowed:
-        raise click.BadParameter(f"expected one of {', '.join(allowed)}", param_hint="-o")
-    if output:
-        try:
-            Path(output).parent.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise click.ClickException(f"{output}: cannot write there: {exc.strerror or exc}") from None
+    if path_to is not None and source is None:
+        raise click.UsageError("--path goes with --source (the path runs from the source)")
+    suffix = _output_suffix(output, (".csv",) if pairs_csv else (".npy", ".ply", ".png"))
+    qm = _load_mesh(mesh_path, prepare)
     try:
-        qm = load_query_mesh(mesh_path, prepare=prepare)
-        pairs = read_pairs(pairs_csv) if pairs_csv else np.array([[source, 0]])
+        pairs = read_pairs(pairs_csv) if pairs_csv else np.array([[source, source if path_to is None else path_to]])
         net_pairs = qm.vertices(pairs)
     except (MeshError, ValueError) as exc:
         raise click.ClickException(f"{mesh_path}: {exc}") from None
@@ -201,11 +197,7 @@ def query(files, pretrained, source, pairs_csv, output, exact, prepare, device, 
         except MeshError as exc:
             raise click.ClickException(f"{mesh_path}: --exact: {exc.reason}") from None
 
-    from .train import pick_device
-
-    model = GeGnn.pretrained(files[0] if len(files) == 2 else None) if pretrained \
-        else GeGnn.from_checkpoint(files[0])
-    emb = model.to(pick_device(device)).embed(qm.mesh.vertices, qm.mesh.faces, precision=precision)
+    emb = _load_model(model_spec, pretrained, device).embed(qm.mesh.vertices, qm.mesh.faces, precision=precision)
     if pairs_csv:
         d = emb.distance(net_pairs[:, 0], net_pairs[:, 1])
         lines = ["i,j,distance"] + [f"{i},{j},{x:.6g}" for (i, j), x in zip(pairs.tolist(), d.tolist())]
@@ -240,6 +232,9 @@ def query(files, pretrained, source, pairs_csv, output, exact, prepare, device, 
         click.echo(f"mean relative error vs exact: {100 * mre:.2f}% (median {100 * np.nanmedian(err):.2f}%, "
                    f"max {100 * np.nanmax(err):.1f}%)" + (" on the source's part" if n_parts > 1 else ""))
         title += f": MRE {100 * mre:.2f}%"
+    lines = []
+    if path_to is not None:
+        lines = _paths(emb, qm, src, int(net_pairs[0, 1]), path_to, exact_d, name)
     top = float(np.nanmax(exact_d if exact_d is not None else field))
     if suffix == ".npy":
         np.save(output, qm.to_file(field))
@@ -260,7 +255,269 @@ def query(files, pretrained, source, pairs_csv, output, exact, prepare, device, 
             panels += [Panel(exact_d, "exact", vmin=0, vmax=top),
                        Panel(np.where(np.isnan(err) & on, 0.0, err), "relative error", "magma",
                              "|pred - exact| / exact", 0, 0.1, isolines=0)]
-        save_panels(output, [Row(qm.mesh.vertices, qm.mesh.faces, src, panels)], suptitle=title)
+        save_panels(output, [Row(qm.mesh.vertices, qm.mesh.faces, src, panels, lines)], suptitle=title)
+    if output:
+        click.echo(f"written {output}")
+
+
+# -- shared by the commands on a user's mesh --------------------------------------------------------------
+def _model_and_meshes(files, pretrained, many=False):
+    """``[CHECKPOINT|NAME] MESH...`` -> (checkpoint path, pretrained name or None; mesh paths)."""
+    from .model import PRETRAINED
+
+    usage = "give CHECKPOINT MESH, or --pretrained [NAME] MESH" + ("..." if many else "")
+    if pretrained:
+        spec = files[0] if len(files) > 1 and files[0] in PRETRAINED else None
+        if spec is None and len(files) > 1 and not many:
+            raise click.UsageError(f"no pretrained model {files[0]!r}; shipped: {', '.join(PRETRAINED)}")
+        meshes = files[1:] if spec else files
+    else:
+        spec, meshes = files[0], files[1:]
+    if not meshes or (len(meshes) > 1 and not many):
+        raise click.UsageError(usage)
+    for path in ([] if pretrained else [spec]) + list(meshes):
+        if not Path(path).is_file():
+            raise click.BadParameter(f"{path}: no such file", param_hint="[CHECKPOINT] MESH")
+    return spec, list(meshes)
+
+
+def _load_model(spec, pretrained, device):
+    from .model import GeGnn
+    from .train import pick_device
+
+    model = GeGnn.pretrained(spec) if pretrained else GeGnn.from_checkpoint(spec)
+    return model.to(pick_device(device))
+
+
+def _output_suffix(output, allowed) -> str:
+    """The suffix of ``output`` (checked against ``allowed``), its folder made; "" without output."""
+    if not output:
+        return ""
+    suffix = Path(output).suffix.lower()
+    if suffix not in allowed:
+        raise click.BadParameter(f"expected one of {', '.join(allowed)}", param_hint="-o")
+    try:
+        Path(output).parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise click.ClickException(f"{output}: cannot write there: {exc.strerror or exc}") from None
+    return suffix
+
+
+def _load_mesh(path, prepare):
+    from geodata.mesh import MeshError
+
+    from .query import load_query_mesh
+    try:
+        return load_query_mesh(path, prepare=prepare)
+    except (MeshError, ValueError) as exc:
+        raise click.ClickException(f"{path}: {exc}") from None
+
+
+def _paths(emb, qm, src, dst, path_to, exact_d, name) -> list:
+    """Trace the predicted path (and with the exact field, the edge-flip one); report; lines to draw."""
+    import numpy as np
+
+    path = emb.path(src, dst)
+    note = "" if path.traced else " (the field has a local minimum on the way: finished along edges)"
+    click.echo(f"{name}: path to {path_to}: {len(path.points)} points, length {path.length:.4g}, predicted "
+               f"distance {float(emb.distance(src, dst)):.4g}{note}")
+    lines = [(path.points, f"predicted path ({path.length:.3g})")]
+    if exact_d is not None and dst != src:
+        import potpourri3d as pp
+        try:
+            flip = pp.EdgeFlipGeodesicSolver(qm.mesh.vertices, qm.mesh.faces).find_geodesic_path(src, dst)
+        except (RuntimeError, ValueError) as exc:
+            click.echo(f"{name}: no edge-flip path: {exc}")
+        else:
+            flip_len = float(np.linalg.norm(np.diff(flip, axis=0), axis=1).sum())
+            click.echo(f"{name}: exact distance {exact_d[dst]:.4g}; edge-flip path length {flip_len:.4g}; "
+                       f"predicted path / edge-flip path {path.length / flip_len:.4f}")
+            lines.append((flip, f"exact path ({flip_len:.3g})"))
+    return lines
+
+
+@main.command(context_settings={"max_content_width": 100})
+@click.argument("files", **MODEL_ARG)
+@click.option("--pretrained", is_flag=True, help=PRETRAINED_HELP)
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
+              help="The finetuned checkpoint (.safetensors): a normal checkpoint for query, eval, train --init.")
+@click.option("--sources", default=32, show_default=True, help="Random sources whose exact fields train.")
+@click.option("--held-out", default=8, show_default=True, help="More sources, never trained on: the error "
+                                                                "before and after is measured on their fields.")
+@click.option("--steps", default=100, show_default=True, help="Steps of the whole network (~0.5 s each at 5k "
+                                                               "vertices on a 2-core CPU).")
+@click.option("--decoder-steps", default=500, show_default=True,
+              help="Steps of the distance decoder alone on the frozen codes first (~10 ms each).")
+@click.option("--lr", default=1e-3, show_default=True, help="Learning rate of the network steps.")
+@click.option("--pairs-per-step", default=20_000, show_default=True)
+@click.option("--prepare", is_flag=True, help="Run the geodata pipeline first (watertight, ~5k vertices); the "
+                                              "model is then tuned to the prepared mesh.")
+@click.option("--seed", default=0, show_default=True, help="Seed of the source choice and the pair sampling.")
+@click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True)
+def finetune(files, pretrained, output, sources, held_out, steps, decoder_steps, lr, pairs_per_step, prepare,
+             seed, device):
+    """Finetune CHECKPOINT (or --pretrained) on the one mesh MESH: exact distances from --sources random
+    vertices are the training data; the held-out sources' fields measure the error before and after.
+
+    \b
+    Examples:
+      gegnn finetune --pretrained bunny.obj -o bunny.safetensors
+      gegnn finetune --pretrained paper scan.ply --prepare --steps 300 -o scan.safetensors
+      gegnn finetune runs/a/best.safetensors part.obj --sources 64 -o part.safetensors
+      gegnn query part.safetensors part.obj --source 0 --exact -o check.png
+    """
+    import time
+
+    from geodata.mesh import MeshError
+
+    from .finetune import finetune as run_finetune
+
+    spec, (mesh_path,) = _model_and_meshes(files, pretrained)
+    _output_suffix(output, (".safetensors",))
+    qm = _load_mesh(mesh_path, prepare)
+    model = _load_model(spec, pretrained, device)
+    name = Path(mesh_path).name
+    click.echo(f"{name}: {len(qm.mesh.vertices)} vertices; exact fields from {sources} + {held_out} sources, "
+               f"then {decoder_steps} decoder and {steps} network steps")
+    t0 = time.process_time()
+    try:
+        r = run_finetune(model, qm.mesh.vertices, qm.mesh.faces, sources=sources, held_out=held_out, steps=steps,
+                         decoder_steps=decoder_steps, lr=lr, pairs_per_step=pairs_per_step, seed=seed,
+                         progress=True)
+    except MeshError as exc:
+        raise click.ClickException(f"{mesh_path}: {exc.reason}") from None
+    except ValueError as exc:
+        raise click.ClickException(f"{mesh_path}: {exc}") from None
+    model.save(output, metadata={"finetuned_on": name, "finetune": dict(
+        sources=sources, held_out=held_out, steps=steps, decoder_steps=decoder_steps, lr=lr, seed=seed,
+        prepare=prepare, held_out_mre_before=r.mre_before, held_out_mre_after=r.mre_after)})
+    click.echo(f"{name}: held-out MRE {100 * r.mre_before:.2f}% -> {100 * r.mre_after:.2f}% "
+               f"({len(r.held_out_sources)} sources x all vertices); exact fields {r.exact_seconds:.1f} s, "
+               f"training {r.train_seconds:.1f} s ({time.process_time() - t0:.0f} CPU s); written {output}")
+
+
+@main.command(context_settings={"max_content_width": 100})
+@click.argument("files", **MODEL_ARG)
+@click.option("--pretrained", is_flag=True, help=PRETRAINED_HELP)
+@click.option("--center", required=True, type=int, help="Center vertex of the map (the file's own numbering).")
+@click.option("--radius", type=float, help="Geodesic radius of the textured disc, in the mesh's units "
+                                           "[default: 0.4 of the mesh's half-extent].")
+@click.option("--squares", default=8, show_default=True, help="Checker squares across the disc's diameter.")
+@click.option("--compare", is_flag=True, help="Also the vector-heat log map (potpourri3d, Sharp et al. 2019) "
+                                              "side by side, and the mean difference of the two.")
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
+              help="textured.png (rendered), or uv.npy ((u, v) per file vertex, NaN outside the disc).")
+@click.option("--prepare", is_flag=True, help="Run the geodata pipeline first (watertight, ~5k vertices).")
+@click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True)
+def texture(files, pretrained, center, radius, squares, compare, output, prepare, device):
+    """Texture MESH around a vertex with the geodesic polar coordinates (discrete log map) that the
+    model's distance queries give: a checkerboard decal, its u axis drawn red.
+
+    \b
+    Examples:
+      gegnn texture --pretrained bunny.obj --center 0 -o textured.png
+      gegnn texture --pretrained bunny.obj --center 0 --radius 0.05 --compare -o compare.png
+      gegnn texture runs/a/best.safetensors part.obj --center 10 -o uv.npy
+    """
+    import numpy as np
+
+    spec, (mesh_path,) = _model_and_meshes(files, pretrained)
+    suffix = _output_suffix(output, (".png", ".npy"))
+    qm = _load_mesh(mesh_path, prepare)
+    try:
+        c = int(qm.vertices(center))
+    except ValueError as exc:
+        raise click.ClickException(f"{mesh_path}: {exc}") from None
+    radius = radius or 0.4 * qm.scale
+    emb = _load_model(spec, pretrained, device).embed(qm.mesh.vertices, qm.mesh.faces)
+    lm = emb.log_map(c, radius)
+    uv = np.full((len(qm.mesh.vertices), 2), np.nan)
+    uv[lm.vertices] = lm.uv
+    name = Path(mesh_path).name
+    click.echo(f"{name}: {len(lm.vertices)} vertices within {radius:.4g} of vertex {center}")
+    panels = [("log map from distance queries", uv)]
+    if compare:
+        from .logmap import vector_heat_log_map
+        ref, diff = vector_heat_log_map(qm.mesh.vertices, qm.mesh.faces, lm)
+        click.echo(f"{name}: vs the vector-heat log map: mean |difference| {diff:.4f} of the radius "
+                   f"(after the best rotation of the tangent frames)")
+        full = np.full_like(uv, np.nan)
+        full[lm.vertices] = ref
+        panels.append(("vector heat (potpourri3d)", full))
+    if suffix == ".npy":
+        np.save(output, np.stack([qm.to_file(uv[:, 0]), qm.to_file(uv[:, 1])], axis=1))
+    else:
+        from .render import Panel, Row, save_panels
+        save_panels(output, [Row(qm.mesh.vertices, qm.mesh.faces, c, [
+            Panel(f, title, vmax=2 * radius / squares) for title, f in panels])],
+            suptitle=f"{name}, center {center}, radius {radius:.3g}")
+    click.echo(f"written {output}")
+
+
+@main.command("shape-distribution", context_settings={"max_content_width": 100})
+@click.argument("files", nargs=-1, required=True, type=click.Path(dir_okay=False),
+                metavar="[CHECKPOINT|NAME] MESH...")
+@click.option("--pretrained", is_flag=True, help=PRETRAINED_HELP)
+@click.option("--pairs", default=1_000_000, show_default=True, help="Random point pairs per mesh.")
+@click.option("--bins", default=64, show_default=True)
+@click.option("--seed", default=0, show_default=True)
+@click.option("-o", "--output", type=click.Path(dir_okay=False),
+              help="d2.png (geodesic and Euclidean histograms), or d2.csv (the densities).")
+@click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True)
+def shape_distribution(files, pretrained, pairs, bins, seed, output, device):
+    """Shape distributions (D2, Osada et al. 2002) of each MESH with predicted geodesic distances, next to
+    the Euclidean ones: histograms of the distance between random surface points over its mean. With
+    several meshes, the L1 distance of each histogram to the first mesh's (0: equal, 2: disjoint).
+
+    \b
+    Examples:
+      gegnn shape-distribution --pretrained horse.obj horse-bent.obj -o d2.png
+      gegnn shape-distribution runs/a/best.safetensors *.obj --pairs 200000 -o d2.csv
+    """
+    import numpy as np
+
+    from .statistics import histogram_l1, sample_pairs, shape_distribution as histogram
+    from .query import source_part
+
+    spec, meshes = _model_and_meshes(files, pretrained, many=True)
+    suffix = _output_suffix(output, (".png", ".csv"))
+    model = _load_model(spec, pretrained, device)
+    results = []
+    for path in meshes:
+        qm = _load_mesh(path, False)
+        v, f = qm.mesh.vertices, qm.mesh.faces
+        part = source_part(qm.mesh, int(np.argmax(np.bincount(f.ravel(), minlength=len(v)))))[0]
+        p = sample_pairs(v, f, pairs, seed, part)
+        geo = histogram(model.embed(v, f).distance(p[:, 0], p[:, 1]), bins)
+        euc = histogram(np.linalg.norm(v[p[:, 0]] - v[p[:, 1]], axis=1), bins)
+        results.append((Path(path).name, geo, euc))
+        line = f"{Path(path).name}: mean geodesic {geo.mean:.4g}, mean Euclidean {euc.mean:.4g}"
+        if len(results) > 1:
+            line += (f"; L1 to {results[0][0]}: geodesic {histogram_l1(geo, results[0][1]):.3f}, "
+                     f"Euclidean {histogram_l1(euc, results[0][2]):.3f}")
+        click.echo(line)
+    if suffix == ".csv":
+        header = ["ratio_lo", "ratio_hi"] + [f"{n}:{k}" for n, *_ in results for k in ("geodesic", "euclidean")]
+        columns = [geo.edges[:-1], geo.edges[1:]] + [h.density for _, *hs in results for h in hs]
+        with open(output, "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(header)
+            w.writerows(np.stack(columns, axis=1).round(6).tolist())
+    elif suffix == ".png":
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        fig, axes = plt.subplots(1, 2, figsize=(10, 3.6), sharey=True)
+        for ax, k, title in ((axes[0], 1, "geodesic (predicted)"), (axes[1], 2, "Euclidean")):
+            for r in results:
+                ax.stairs(r[k].density, r[k].edges, label=r[0], lw=1.5)
+            ax.set(title=title, xlabel="distance / mean distance")
+        axes[0].set_ylabel("density")
+        axes[0].legend(fontsize=8)
+        fig.tight_layout()
+        fig.savefig(output, dpi=100)
+        plt.close(fig)
     if output:
         click.echo(f"written {output}")
 

@@ -34,11 +34,16 @@ class Embedding:
             embeddings, 2674 of a landmark model's 196-d codes): fastest on CPU, large enough for the
             matmul kernels, small enough that intermediates stay in cache (K = 128: 0.33 s per 1M
             queries against 0.41 s with 8192).
+        vertices, faces: the embedded mesh in its own units (:meth:`gegnn.GeGnn.embed` passes them):
+            needed by the geometric queries, :meth:`path` and :meth:`log_map`.
     """
 
     def __init__(self, features: Tensor, decoder, scale: float = 1.0, precision: str = "auto",
-                 chunk: int | None = None):
+                 chunk: int | None = None, vertices: np.ndarray | None = None, faces: np.ndarray | None = None):
         self.features = features.detach()
+        self.vertices = None if vertices is None else np.asarray(vertices, dtype=np.float64)
+        self.faces = None if faces is None else np.asarray(faces, dtype=np.int64)
+        self._topology = None
         self.decoder, self.scale = decoder, float(scale)
         self.chunk = chunk or max(1024, CHUNK_VALUES // self.features.shape[1])
         if precision == "auto":
@@ -67,6 +72,37 @@ class Embedding:
     def field(self, source: int) -> np.ndarray:
         """Distances from vertex ``source`` to every vertex, (N,)."""
         return self.distance(np.full(self.num_vertices, int(source)), np.arange(self.num_vertices))
+
+    def path(self, i: int, j: int):
+        """The geodesic path from vertex ``i`` to vertex ``j``: the steepest descent of the predicted field
+        d(i, .) traced back from ``j`` (:mod:`gegnn.paths`); O(k) queries for the k faces it crosses.
+
+        Returns:
+            :class:`gegnn.paths.Path`: ``points`` (K, 3) on the surface from i to j, ``length``.
+        """
+        from .paths import trace_path
+        i, j = int(i), int(j)
+        return trace_path(self.topology, lambda v: self.distance(i, v), i, j)
+
+    def log_map(self, center: int, radius: float | None = None):
+        """Geodesic polar coordinates around vertex ``center`` (the discrete logarithmic map) of the
+        vertices within ``radius`` (default: all), from distance queries alone (:mod:`gegnn.logmap`).
+
+        Returns:
+            :class:`gegnn.logmap.LogMap`: ``vertices`` (M,), ``uv`` (M, 2), the tangent ``frame``.
+        """
+        from .logmap import log_map
+        return log_map(self.topology, self.distance, int(center), radius)
+
+    @property
+    def topology(self):
+        """Adjacency of the embedded mesh (built on first use)."""
+        if self.vertices is None or self.faces is None:
+            raise ValueError("this Embedding has no mesh: make it with GeGnn.embed, or pass vertices and faces")
+        if self._topology is None:
+            from .paths import SurfaceTopology
+            self._topology = SurfaceTopology(self.vertices, self.faces)
+        return self._topology
 
     def _decoder_layers(self):
         if self.decoder.mlp is None:

@@ -175,22 +175,29 @@ class GeGnn(nn.Module):
         from .embedding import Embedding
 
         vertices, faces = _validated(vertices, faces)
+        device = torch.device(device) if device else next(self.parameters()).device
+        h, fields, scale = self.inputs(vertices, faces, device)
+        was_training = self.training
+        self.eval()
+        with torch.autocast(device.type, dtype=torch.bfloat16, enabled=precision == "bf16"):
+            codes = self(h, fields=fields).float()
+        self.train(was_training)
+        return Embedding(codes, self.distance, scale, vertices=vertices, faces=faces)
+
+    def inputs(self, vertices: np.ndarray, faces: np.ndarray, device) -> tuple[Hierarchy, Tensor | None, float]:
+        """What the network reads for one mesh in any units: the GeoPool hierarchy of the normalized mesh
+        (bounding box centered, longest half-extent 1), the landmark fields in normalized units (None
+        without landmarks) and the scale back to the input's units."""
+        vertices, faces = _validated(vertices, faces)
         center, scale = normalization(vertices)
         scale = scale or 1.0  # a single point: keep units
         mesh = Mesh((vertices - center) / scale, faces)
         graph = self.mesh_graph(mesh.vertices, vertex_normals(mesh).astype(np.float32), unique_edges(mesh.faces))
-        device = torch.device(device) if device else next(self.parameters()).device
         fields = None
         if self.config.landmarks:
             fields = torch.as_tensor(landmark_fields(mesh.vertices, mesh.faces, self.config.landmarks).distances,
                                      device=device)
-        was_training = self.training
-        self.eval()
-        h = self.hierarchy(graph).to(device)
-        with torch.autocast(device.type, dtype=torch.bfloat16, enabled=precision == "bf16"):
-            codes = self(h, fields=fields).float()
-        self.train(was_training)
-        return Embedding(codes, self.distance, scale)
+        return self.hierarchy(graph).to(device), fields, scale
 
     # -- checkpoints ------------------------------------------------------------------------------------
     def save(self, path, metadata: dict | None = None) -> None:

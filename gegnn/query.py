@@ -17,7 +17,8 @@ from geodata.mesh import Mesh, MeshError, edge_face_counts, vertex_components
 
 from .train import METRIC_EPS
 
-__all__ = ["QueryMesh", "load_query_mesh", "exact_field", "relative_errors", "read_pairs", "source_part",
+__all__ = ["QueryMesh", "load_query_mesh", "exact_field", "exact_fields", "relative_errors", "read_pairs",
+           "source_part",
            "resolution_note"]
 
 
@@ -76,17 +77,29 @@ def load_query_mesh(path, prepare: bool = False, target_vertices: int = 5000) ->
 
 
 def exact_field(mesh: Mesh, source: int) -> np.ndarray:
-    """Exact geodesic distances from ``source`` (the default geodata backend), in a forked child: native
-    code that crashes on some input then fails with a MeshError instead of killing the caller."""
-    from geodata.geodesic import exact_geodesic_distances
+    """Exact geodesic distances from ``source`` (NaN off its connected part); see :func:`exact_fields`."""
+    return exact_fields(mesh, np.array([source]))[0]
+
+
+def exact_fields(mesh: Mesh, sources: np.ndarray) -> np.ndarray:
+    """Exact geodesic distances (S, N) from each of ``sources`` (the default geodata backend, NaN off the
+    source's part), in a forked child: native code that crashes on some input then fails with a
+    MeshError instead of killing the caller."""
     from geodata.parallel import run_isolated
 
     _, counts = edge_face_counts(mesh.faces)
     if (counts > 2).any():
         raise MeshError("exact", f"{int((counts > 2).sum())} non-manifold edges (exact geodesics need a "
                                  "manifold mesh; --prepare makes one)")
-    d = run_isolated(exact_geodesic_distances, mesh, source)
+    d = run_isolated(_solve_all, mesh, [int(s) for s in sources])
     return np.where(np.isfinite(d), d, np.nan)
+
+
+def _solve_all(mesh: Mesh, sources: list[int]) -> np.ndarray:
+    from geodata.geodesic import geodesic_solver
+
+    solve = geodesic_solver(mesh)
+    return np.stack([solve(s) for s in sources])
 
 
 TRAINED_VERTICES = (1000, 30000)  # outside this range a mesh is far from the training meshes' ~5k

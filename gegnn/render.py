@@ -6,11 +6,12 @@ results report.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["View", "default_view", "rasterize", "shade_field", "Panel", "Row", "save_panels"]
+__all__ = ["View", "default_view", "project", "rasterize", "shade_field", "checkerboard", "visible_polyline",
+           "Panel", "Row", "save_panels"]
 
 
 @dataclass(frozen=True)
@@ -46,15 +47,22 @@ def default_view(vertices: np.ndarray, towards: np.ndarray | None = None, tilt: 
     return View(tilt_rot @ rot, center)
 
 
-def rasterize(vertices: np.ndarray, faces: np.ndarray, view: View, size: int = 512, margin: float = 0.05):
-    """Z-buffer rasterization. Returns (face index (H, W) with -1 for background, barycentric
-    coordinates (H, W, 3), projected vertex pixels (N, 2), vertex depths (N,))."""
+def project(vertices: np.ndarray, view: View, points: np.ndarray, size: int = 512, margin: float = 0.05):
+    """Pixel coordinates (P, 2) and depths (P,) of ``points`` in the picture of the mesh ``vertices``
+    (the mesh fills the picture up to ``margin``)."""
     p = (vertices - view.center) @ view.rotation.T
     lo, hi = p[:, :2].min(axis=0), p[:, :2].max(axis=0)
     scale = (1 - 2 * margin) * size / max((hi - lo).max(), 1e-12)
-    xy = (p[:, :2] - (lo + hi) / 2) * scale + size / 2
+    q = (np.asarray(points, dtype=np.float64) - view.center) @ view.rotation.T
+    xy = (q[:, :2] - (lo + hi) / 2) * scale + size / 2
     xy[:, 1] = size - xy[:, 1]  # image rows grow downwards
-    depth = p[:, 2]
+    return xy, q[:, 2]
+
+
+def rasterize(vertices: np.ndarray, faces: np.ndarray, view: View, size: int = 512, margin: float = 0.05):
+    """Z-buffer rasterization. Returns (face index (H, W) with -1 for background, barycentric
+    coordinates (H, W, 3), projected vertex pixels (N, 2), vertex depths (N,))."""
+    xy, depth = project(vertices, view, vertices, size, margin)
     tri = xy[faces]                                          # (F, 3, 2)
     x0 = np.clip(np.floor(tri.min(axis=1)).astype(int), 0, size - 1)
     x1 = np.clip(np.ceil(tri.max(axis=1)).astype(int), 0, size - 1)
@@ -102,10 +110,34 @@ def rasterize(vertices: np.ndarray, faces: np.ndarray, view: View, size: int = 5
 UNREACHABLE = (0.62, 0.62, 0.62, 1.0)  # grey: vertices without a value
 
 
+def checkerboard(uv: np.ndarray, square: float) -> np.ndarray:
+    """RGBA (..., 4) of a two-color checkerboard with squares of side ``square`` in (u, v), its axes
+    tinted (u > 0 red, v > 0 blue squares lighter) so the orientation shows."""
+    cell = np.floor(uv / square).astype(np.int64)
+    dark = (cell[..., 0] + cell[..., 1]) % 2 == 0
+    rgba = np.ones(uv.shape[:-1] + (4,))
+    rgba[..., :3] = np.where(dark[..., None], (0.15, 0.2, 0.35), (0.95, 0.9, 0.8))
+    axis = (np.abs(uv[..., 1]) < square / 8) & (uv[..., 0] > 0)
+    rgba[axis, :3] = (0.85, 0.1, 0.1)
+    return rgba
+
+
+def visible_polyline(vertices, faces, view: View, points: np.ndarray, size: int = 512) -> np.ndarray:
+    """Pixel coordinates (P, 2) of ``points`` on the mesh, NaN where the surface hides them."""
+    face_img, bary, _, depth = rasterize(vertices, faces, view, size)
+    xy, z = project(vertices, view, points, size)
+    px = np.clip(np.round(xy - 0.5).astype(np.int64), 0, size - 1)
+    f = face_img[px[:, 1], px[:, 0]]
+    surface = np.where(f >= 0, (depth[faces[np.maximum(f, 0)]] * bary[px[:, 1], px[:, 0]]).sum(axis=1), -np.inf)
+    hidden = z < surface - 0.02 * np.ptp(depth)
+    return np.where(hidden[:, None], np.nan, xy)
+
+
 def shade_field(vertices, faces, field, view: View, *, size=512, cmap="viridis", vmin=None, vmax=None,
                 isolines: int = 12, marker: int | None = None) -> np.ndarray:
     """RGBA image (H, W, 4) of ``field`` (per vertex) with Lambert shading and ``isolines`` levels
-    between vmin and vmax; ``marker`` draws a red dot on that vertex when it is visible."""
+    between vmin and vmax; ``marker`` draws a red dot on that vertex when it is visible. A field of
+    (u, v) pairs (N, 2) is drawn as a checkerboard with squares of side ``vmax`` instead."""
     import matplotlib
 
     vmin = float(np.nanmin(field)) if vmin is None else vmin
@@ -113,10 +145,17 @@ def shade_field(vertices, faces, field, view: View, *, size=512, cmap="viridis",
     face_img, bary, xy, depth = rasterize(vertices, faces, view, size)
     covered = face_img >= 0
     f = np.where(covered, face_img, 0)
-    value = (field[faces[f]] * bary).sum(axis=2)
-    unreachable = covered & np.isnan(value)  # NaN: no value there (e.g. another part than the source's)
-    t = np.clip((np.nan_to_num(value) - vmin) / max(vmax - vmin, 1e-12), 0, 1)
-    rgba = matplotlib.colormaps[cmap](t)
+    if field.ndim == 2:  # (u, v) per vertex: a checkerboard texture, interpolated per pixel
+        uv = (field[faces[f]] * bary[..., None]).sum(axis=2)
+        unreachable = covered & np.isnan(uv).any(axis=2)
+        rgba = checkerboard(np.nan_to_num(uv), vmax)
+        t = np.zeros(uv.shape[:2])
+        isolines = 0
+    else:
+        value = (field[faces[f]] * bary).sum(axis=2)
+        unreachable = covered & np.isnan(value)  # NaN: no value there (e.g. another part than the source's)
+        t = np.clip((np.nan_to_num(value) - vmin) / max(vmax - vmin, 1e-12), 0, 1)
+        rgba = matplotlib.colormaps[cmap](t)
     rgba[unreachable] = UNREACHABLE
     n = np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]], vertices[faces[:, 2]] - vertices[faces[:, 0]])
     n_view = (n @ view.rotation.T)[:, 2] / np.maximum(np.linalg.norm(n, axis=1), 1e-30)
@@ -147,7 +186,8 @@ def shade_field(vertices, faces, field, view: View, *, size=512, cmap="viridis",
 
 @dataclass
 class Panel:
-    """One picture of a figure: a per-vertex field, its title, colormap, color bar label and range."""
+    """One picture of a figure: a per-vertex field, its title, colormap, color bar label and range.
+    A (u, v) field (N, 2) is a checkerboard texture with squares of side ``vmax`` (no color bar)."""
 
     field: np.ndarray
     title: str
@@ -160,12 +200,14 @@ class Panel:
 
 @dataclass
 class Row:
-    """One mesh's row of a figure: its panels, and the source vertex to mark (None: no marker)."""
+    """One mesh's row of a figure: its panels, the source vertex to mark (None: no marker), and polylines
+    on the surface drawn on every panel (e.g. geodesic paths), with their legend labels."""
 
     vertices: np.ndarray
     faces: np.ndarray
     source: int | None
     panels: list[Panel]
+    lines: list[tuple[np.ndarray, str]] = field(default_factory=list)
 
 
 def save_panels(path, rows: list[Row], *, suptitle: str | None = None, size: int = 480) -> None:
@@ -193,6 +235,13 @@ def save_panels(path, rows: list[Row], *, suptitle: str | None = None, size: int
             ax.imshow(shade_field(v, f, p.field, cam, size=size, cmap=p.cmap, vmin=vmin, vmax=vmax,
                                    isolines=p.isolines, marker=src))
             ax.set_title(p.title, fontsize=10)
+            for (points, label), color in zip(row.lines, ("#e8196b", "#ffd400", "#00e5ff")):
+                xy = visible_polyline(v, f, cam, points, size)
+                ax.plot(xy[:, 0], xy[:, 1], color=color, lw=1.6, label=label)
+            if row.lines and c == 0:
+                ax.legend(loc="lower left", fontsize=7, framealpha=0.7)
+            if p.field.ndim == 2:
+                continue
             mappable = matplotlib.cm.ScalarMappable(matplotlib.colors.Normalize(vmin, vmax), p.cmap)
             fig.colorbar(mappable, ax=ax, fraction=0.046, pad=0.02, label=p.label)
     if suptitle:
