@@ -199,6 +199,12 @@ class GeGnn(nn.Module):
                                      device=device)
         return self.hierarchy(graph).to(device), fields, scale
 
+    def finetune(self, vertices: np.ndarray, faces: np.ndarray, **options):
+        """Finetune in place on one mesh from exact distances of a few of its vertices; returns the
+        held-out error before and after (:func:`gegnn.finetune.finetune`, which lists the options)."""
+        from .finetune import finetune
+        return finetune(self, vertices, faces, **options)
+
     # -- checkpoints ------------------------------------------------------------------------------------
     def save(self, path, metadata: dict | None = None) -> None:
         """Single-file safetensors checkpoint: weights plus the config (JSON) in the metadata."""

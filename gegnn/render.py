@@ -235,9 +235,9 @@ def save_panels(path, rows: list[Row], *, suptitle: str | None = None, size: int
             ax.imshow(shade_field(v, f, p.field, cam, size=size, cmap=p.cmap, vmin=vmin, vmax=vmax,
                                    isolines=p.isolines, marker=src))
             ax.set_title(p.title, fontsize=10)
-            for (points, label), color in zip(row.lines, ("#e8196b", "#ffd400", "#00e5ff")):
+            for (points, label), color, style in zip(row.lines, ("#e8196b", "#ffd400", "#00e5ff"), ("-", "--", ":")):
                 xy = visible_polyline(v, f, cam, points, size)
-                ax.plot(xy[:, 0], xy[:, 1], color=color, lw=1.6, label=label)
+                ax.plot(xy[:, 0], xy[:, 1], style, color=color, lw=1.6, label=label)
             if row.lines and c == 0:
                 ax.legend(loc="lower left", fontsize=7, framealpha=0.7)
             if p.field.ndim == 2:

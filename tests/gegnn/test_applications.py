@@ -8,7 +8,6 @@ import trimesh
 
 from gegnn import Embedding, GeGnn
 from gegnn.decoders import DistanceDecoder
-from gegnn.finetune import finetune
 from gegnn.logmap import log_map, vector_heat_log_map
 from gegnn.paths import SurfaceTopology, trace_path
 from gegnn.statistics import (histogram_l1, sample_pairs, shape_distribution, triangle_violations,
@@ -179,7 +178,7 @@ def test_finetune_lowers_the_held_out_error():
     m = trimesh.creation.icosphere(3)
     v = np.asarray(m.vertices) * [1.0, 0.5, 0.3]  # a flat ellipsoid, far from the paper model's error floor
     model = GeGnn.pretrained("paper")
-    r = finetune(model, v, m.faces, sources=8, held_out=4, steps=3, decoder_steps=200, pairs_per_step=4096)
+    r = model.finetune(v, m.faces, sources=8, held_out=4, steps=3, decoder_steps=200, pairs_per_step=4096)
     assert len(set(r.train_sources) | set(r.held_out_sources)) == 12
     assert r.mre_after < 0.8 * r.mre_before
     assert not model.training

@@ -1,0 +1,169 @@
+"""The paper's applications measured on the validation meshes (docs/applications.md).
+
+    python benchmarks/bench_applications.py data/val.zarr [--only paths logmap triangle finetune d2]
+        [--out docs/img] [--meshes 19] [--finetune-meshes 5]
+
+- paths: predicted path length / potpourri3d's exact edge-flip path length, and / the exact distance,
+  over 8 random pairs per mesh (shipped landmark model);
+- logmap: mean |log map - vector-heat log map| / radius (radius 0.3 in normalized units, 4 centers per
+  mesh), from the model's distances and from exact distances (the method's own error);
+- triangle: fraction of violating triples among 64 random vertices per mesh (all 64^3 triples) for
+  both shipped models and the heat method (potpourri3d, d(a, b) read from a's field);
+- finetune: held-out MRE before and after `finetune` with the command's defaults, and CPU seconds;
+- d2: shape distributions of a validation mesh and a bent copy (geodata augment's bend), predicted
+  geodesic against Euclidean.
+Pictures go to --out. One torch thread (the development CPU has 2 cores).
+"""
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+import zarr
+
+from geodata.mesh import Mesh
+from gegnn import GeGnn
+from gegnn.finetune import finetune
+from gegnn.logmap import log_map, vector_heat_log_map
+from gegnn.query import exact_fields
+from gegnn.statistics import histogram_l1, sample_pairs, shape_distribution, triangle_violations
+
+NORMALIZED_RADIUS = 0.3
+
+
+def meshes(store, n):
+    root = zarr.open_group(store, mode="r")["meshes"]
+    for mesh_id in sorted(root.group_keys())[:n]:
+        g = root[mesh_id]
+        if g.attrs.get("status") == "ok":
+            yield mesh_id, g["vertices"][:].astype(np.float64), g["faces"][:].astype(np.int64)
+
+
+def bench_paths(store, n, out):
+    import potpourri3d as pp
+
+    model = GeGnn.pretrained()
+    ratios, errors = [], []
+    for k, (mesh_id, v, f) in enumerate(meshes(store, n)):
+        emb = model.embed(v, f)
+        flip = pp.EdgeFlipGeodesicSolver(v, f)
+        rng = np.random.default_rng(k)
+        pairs = rng.choice(len(v), (8, 2), replace=False)
+        exact = exact_fields(Mesh(v, f), pairs[:, 0])
+        for (s, t), d in zip(pairs, exact):
+            path = emb.path(int(s), int(t))
+            ref = np.linalg.norm(np.diff(flip.find_geodesic_path(int(s), int(t)), axis=0), axis=1).sum()
+            ratios.append(path.length / ref)
+            errors.append(abs(path.length - d[t]) / d[t])
+        print(f"paths {mesh_id}: length / edge-flip {np.mean(ratios[-8:]):.4f}", flush=True)
+    ratios = np.array(ratios)
+    print(f"paths: {len(ratios)} paths, predicted length / edge-flip length mean {ratios.mean():.4f} "
+          f"(|ratio - 1| mean {np.abs(ratios - 1).mean():.4f}, max {np.abs(ratios - 1).max():.4f}); "
+          f"|length - exact distance| / exact mean {np.mean(errors):.4f}")
+
+
+def bench_logmap(store, n, out):
+    model = GeGnn.pretrained()
+    learned, exact_diffs = [], []
+    for k, (mesh_id, v, f) in enumerate(meshes(store, n)):
+        emb = model.embed(v, f)
+        for c in np.random.default_rng(k).choice(len(v), 4, replace=False):
+            lm = emb.log_map(int(c), NORMALIZED_RADIUS)
+            learned.append(vector_heat_log_map(v, f, lm)[1])
+            ring = np.unique(np.concatenate([emb.topology.neighbours(u) for u in
+                                             np.append(emb.topology.neighbours(int(c)), c)]))
+            fields = dict(zip(ring.tolist(), exact_fields(Mesh(v, f), ring)))
+            exact_lm = log_map(emb.topology, lambda i, j: np.array([fields[a][b] for a, b in
+                                                                      zip(np.ravel(i), np.ravel(j))]).reshape(np.shape(i)),
+                               int(c), NORMALIZED_RADIUS)
+            exact_diffs.append(vector_heat_log_map(v, f, exact_lm)[1])
+        print(f"logmap {mesh_id}: model {np.mean(learned[-4:]):.4f} exact {np.mean(exact_diffs[-4:]):.4f}", flush=True)
+    print(f"logmap: {len(learned)} centers, mean |ours - vector heat| / radius: model distances "
+          f"{np.mean(learned):.4f} (median {np.median(learned):.4f}), exact distances {np.mean(exact_diffs):.4f} "
+          f"(median {np.median(exact_diffs):.4f})")
+
+
+def bench_triangle(store, n, out):
+    import potpourri3d as pp
+
+    models = {name: GeGnn.pretrained(name) for name in ("landmark", "paper")}
+    rows = {name: [] for name in (*models, "heat method")}
+    for k, (mesh_id, v, f) in enumerate(meshes(store, n)):
+        pool = np.zeros(len(v), dtype=bool)
+        pool[np.random.default_rng(k).choice(len(v), 64, replace=False)] = True
+        for name, model in models.items():
+            rows[name].append(triangle_violations(model.embed(v, f).distance, len(v), 400_000, k, pool))
+        solver = pp.MeshHeatMethodDistanceSolver(v, f)
+        ids = np.flatnonzero(pool)
+        row = np.full(len(v), -1)
+        row[ids] = np.arange(len(ids))
+        heat = np.stack([solver.compute_distance(int(s)) for s in ids])  # d(a, b) = heat[row[a], b]
+        rows["heat method"].append(triangle_violations(lambda i, j: heat[row[i], j], len(v), 400_000, k, pool))
+        print(f"triangle {mesh_id}: " + ", ".join(f"{m} {100 * r[-1].fraction:.2f}%" for m, r in rows.items()),
+              flush=True)
+    print("triangle inequality, random triples of 64 vertices per mesh:")
+    for name, reports in rows.items():
+        print(f"  {name}: violating {100 * np.mean([r.fraction for r in reports]):.3f}% of triples; excess of "
+              f"the violating: mean {np.mean([r.mean_excess for r in reports if r.fraction]):.2e}, max "
+              f"{max(r.max_excess for r in reports):.2e}")
+
+
+def bench_finetune(store, n, out, names=("paper", "landmark")):
+    for name in names:
+        rows = []
+        for mesh_id, v, f in meshes(store, n):
+            model = GeGnn.pretrained(name)
+            t0 = time.process_time()
+            r = finetune(model, v, f)
+            cpu = time.process_time() - t0
+            rows.append((r.mre_before, r.mre_after, cpu))
+            print(f"finetune {name} {mesh_id}: {100 * r.mre_before:.2f}% -> {100 * r.mre_after:.2f}%, "
+                  f"{cpu:.0f} CPU s (exact {r.exact_seconds:.1f} s wall)", flush=True)
+        b, a, c = np.array(rows).T
+        print(f"finetune {name}: held-out MRE {100 * b.mean():.2f}% -> {100 * a.mean():.2f}% "
+              f"(ratio {np.mean(a / b):.2f}), {c.mean():.0f} CPU s per mesh")
+
+
+def bench_d2(store, n, out):
+    from geodata.augment import bend
+
+    model = GeGnn.pretrained()
+    mesh_id, v, f = next((m for m in meshes(store, 100) if m[0].startswith("camel")))
+    frame = np.linalg.eigh(np.cov(v.T))[1][:, ::-1]  # longest axis first
+    bent = bend(v, frame, np.pi / 2)
+    hists = []
+    for verts in (v, bent):
+        p = sample_pairs(verts, f, 1_000_000, 0)
+        hists.append((shape_distribution(model.embed(verts, f).distance(p[:, 0], p[:, 1])),
+                      shape_distribution(np.linalg.norm(verts[p[:, 0]] - verts[p[:, 1]], axis=1))))
+    print(f"d2 {mesh_id} vs bent by 90 degrees: L1 geodesic {histogram_l1(hists[0][0], hists[1][0]):.3f}, "
+          f"Euclidean {histogram_l1(hists[0][1], hists[1][1]):.3f}")
+    import trimesh
+    for name, verts in (("camel.obj", v), ("camel-bent.obj", bent)):
+        trimesh.Trimesh(verts, f, process=False).export(Path(out) / name)
+
+
+BENCHES = {"paths": bench_paths, "logmap": bench_logmap, "triangle": bench_triangle, "finetune": bench_finetune,
+           "d2": bench_d2}
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("store")
+    ap.add_argument("--only", nargs="+", choices=list(BENCHES), default=list(BENCHES))
+    ap.add_argument("--meshes", type=int, default=19)
+    ap.add_argument("--finetune-meshes", type=int, default=5)
+    ap.add_argument("--out", default="/tmp")
+    args = ap.parse_args()
+    torch.set_num_threads(1)
+    for name in args.only:
+        t0 = time.perf_counter()
+        BENCHES[name](args.store, args.finetune_meshes if name == "finetune" else args.meshes, args.out)
+        print(f"[{name}: {time.perf_counter() - t0:.0f} s]", flush=True)
+
+
+if __name__ == "__main__":
+    main()
