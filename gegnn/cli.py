@@ -317,7 +317,10 @@ def _paths(emb, qm, src, dst, path_to, exact_d, name) -> list:
     """Trace the predicted path (and with the exact field, the edge-flip one); report; lines to draw."""
     import numpy as np
 
-    path = emb.path(src, dst)
+    try:
+        path = emb.path(src, dst)
+    except ValueError as exc:
+        raise click.ClickException(f"{name}: --path {path_to}: {exc}") from None
     note = "" if path.traced else " (the field has a local minimum on the way: finished along edges)"
     click.echo(f"{name}: path to {path_to}: {len(path.points)} points, length {path.length:.4g}, predicted "
                f"distance {float(emb.distance(src, dst)):.4g}{note}")

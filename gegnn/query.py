@@ -18,8 +18,7 @@ from geodata.mesh import Mesh, MeshError, edge_face_counts, vertex_components
 from .train import METRIC_EPS
 
 __all__ = ["QueryMesh", "load_query_mesh", "exact_field", "exact_fields", "relative_errors", "read_pairs",
-           "source_part",
-           "resolution_note"]
+           "source_part", "resolution_note"]
 
 
 

@@ -74,6 +74,14 @@ def test_a_spurious_minimum_finishes_along_edges():
     assert not path.traced and np.allclose(path.points[0], v[s])
 
 
+def test_no_path_between_separate_parts():
+    v, f = plane(n=5, jitter=0)
+    two_v, two_f = np.r_[v, v + [0, 0, 1]], np.r_[f, f + len(v)]
+    d = np.linalg.norm(two_v - two_v[0], axis=1)
+    with pytest.raises(ValueError, match="not on the target's connected part"):
+        trace_path(SurfaceTopology(two_v, two_f), lambda j: d[j], 0, len(v) + 3)
+
+
 def test_pretrained_path_is_close_to_the_exact_path():
     import potpourri3d as pp
 
