@@ -7,11 +7,11 @@ from pathlib import Path
 
 import click
 
-from .model import GeGnnConfig
+from .model import PRETRAINED, GeGnnConfig
 
 MODEL_ARG = dict(nargs=-1, required=True, type=click.Path(dir_okay=False), metavar="[CHECKPOINT|NAME] MESH")
 PRETRAINED_HELP = ("Use a model shipped in the package instead of CHECKPOINT: the most accurate one, or NAME "
-                   "('landmark', 'paper').")
+                   f"({', '.join(repr(name) for name in PRETRAINED)}).")
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
@@ -263,8 +263,6 @@ def query(files, pretrained, source, pairs_csv, output, exact, path_to, prepare,
 # -- shared by the commands on a user's mesh --------------------------------------------------------------
 def _model_and_meshes(files, pretrained, many=False):
     """``[CHECKPOINT|NAME] MESH...`` -> (checkpoint path, pretrained name or None; mesh paths)."""
-    from .model import PRETRAINED
-
     usage = "give CHECKPOINT MESH, or --pretrained [NAME] MESH" + ("..." if many else "")
     if pretrained:
         spec = files[0] if len(files) > 1 and files[0] in PRETRAINED else None
@@ -344,28 +342,33 @@ def _paths(emb, qm, src, dst, path_to, exact_d, name) -> list:
 @click.option("--pretrained", is_flag=True, help=PRETRAINED_HELP)
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
               help="The finetuned checkpoint (.safetensors): a normal checkpoint for query, eval, train --init.")
-@click.option("--sources", default=32, show_default=True, help="Random sources whose exact fields train.")
+@click.option("--sources", default=64, show_default=True, help="Random sources whose exact fields train.")
 @click.option("--held-out", default=8, show_default=True, help="More sources, never trained on: the error "
                                                                 "before and after is measured on their fields.")
-@click.option("--steps", default=100, show_default=True, help="Steps of the whole network (~0.5 s each at 5k "
-                                                               "vertices on a 2-core CPU).")
-@click.option("--decoder-steps", default=500, show_default=True,
-              help="Steps of the distance decoder alone on the frozen codes first (~10 ms each).")
-@click.option("--lr", default=1e-3, show_default=True, help="Learning rate of the network steps.")
+@click.option("--decoder-steps", default=300, show_default=True,
+              help="Phase 1: steps of the distance decoder alone on the frozen codes (~15 ms each at 5k vertices).")
+@click.option("--head-steps", default=1500, show_default=True,
+              help="Phase 2: steps of the embedding head and the decoder on the frozen U-Net (~30 ms each).")
+@click.option("--steps", default=0, show_default=True,
+              help="Phase 3: steps of the whole network (~0.45 s each on one CPU thread; the paper's 2,500 "
+                   "are for a GPU).")
+@click.option("--head-lr", default=3e-3, show_default=True, help="Learning rate of phases 1 and 2.")
+@click.option("--lr", default=1e-3, show_default=True, help="Learning rate of phase 3.")
 @click.option("--pairs-per-step", default=20_000, show_default=True)
 @click.option("--prepare", is_flag=True, help="Run the geodata pipeline first (watertight, ~5k vertices); the "
                                               "model is then tuned to the prepared mesh.")
 @click.option("--seed", default=0, show_default=True, help="Seed of the source choice and the pair sampling.")
 @click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True)
-def finetune(files, pretrained, output, sources, held_out, steps, decoder_steps, lr, pairs_per_step, prepare,
-             seed, device):
+def finetune(files, pretrained, output, sources, held_out, decoder_steps, head_steps, steps, head_lr, lr,
+             pairs_per_step, prepare, seed, device):
     """Finetune CHECKPOINT (or --pretrained) on the one mesh MESH: exact distances from --sources random
     vertices are the training data; the held-out sources' fields measure the error before and after.
 
     \b
     Examples:
       gegnn finetune --pretrained bunny.obj -o bunny.safetensors
-      gegnn finetune --pretrained paper scan.ply --prepare --steps 300 -o scan.safetensors
+      gegnn finetune --pretrained paper scan.ply --prepare -o scan.safetensors
+      gegnn finetune --pretrained part.obj --steps 2500 --device cuda -o part.safetensors   # the paper's
       gegnn finetune runs/a/best.safetensors part.obj --sources 64 -o part.safetensors
       gegnn query part.safetensors part.obj --source 0 --exact -o check.png
     """
@@ -381,18 +384,19 @@ def finetune(files, pretrained, output, sources, held_out, steps, decoder_steps,
     model = _load_model(spec, pretrained, device)
     name = Path(mesh_path).name
     click.echo(f"{name}: {len(qm.mesh.vertices)} vertices; exact fields from {sources} + {held_out} sources, "
-               f"then {decoder_steps} decoder and {steps} network steps")
+               f"then {decoder_steps} decoder, {head_steps} head and {steps} network steps")
     t0 = time.process_time()
     try:
-        r = run_finetune(model, qm.mesh.vertices, qm.mesh.faces, sources=sources, held_out=held_out, steps=steps,
-                         decoder_steps=decoder_steps, lr=lr, pairs_per_step=pairs_per_step, seed=seed,
-                         progress=True)
+        r = run_finetune(model, qm.mesh.vertices, qm.mesh.faces, sources=sources, held_out=held_out,
+                         decoder_steps=decoder_steps, head_steps=head_steps, steps=steps, head_lr=head_lr, lr=lr,
+                         pairs_per_step=pairs_per_step, seed=seed, progress=True)
     except MeshError as exc:
         raise click.ClickException(f"{mesh_path}: {exc.reason}") from None
     except ValueError as exc:
         raise click.ClickException(f"{mesh_path}: {exc}") from None
     model.save(output, metadata={"finetuned_on": name, "finetune": dict(
-        sources=sources, held_out=held_out, steps=steps, decoder_steps=decoder_steps, lr=lr, seed=seed,
+        sources=sources, held_out=held_out, decoder_steps=decoder_steps, head_steps=head_steps, steps=steps,
+        head_lr=head_lr, lr=lr, seed=seed,
         prepare=prepare, held_out_mre_before=r.mre_before, held_out_mre_after=r.mre_after)})
     click.echo(f"{name}: held-out MRE {100 * r.mre_before:.2f}% -> {100 * r.mre_after:.2f}% "
                f"({len(r.held_out_sources)} sources x all vertices); exact fields {r.exact_seconds:.1f} s, "

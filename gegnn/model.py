@@ -131,16 +131,22 @@ class GeGnn(nn.Module):
         landmarks the decoder's codes ``[e | fields | pos]`` (``fields``: (N, K) landmark distances in
         normalized units). With ``pairs`` (P, 2) indexing those vertices, the decoded distances (P,)
         instead (one call, so DistributedDataParallel sees the decoder's parameters used inside forward)."""
-        z = self.head(self._unet(h))
+        z = self.codes(self._unet(h), h, fields)
+        if pairs is None:
+            return z
+        pairs = pairs.long()
+        return self.distance(z[pairs[:, 0]], z[pairs[:, 1]])
+
+    def codes(self, trunk: Tensor, h: Hierarchy, fields: Tensor | None = None) -> Tensor:
+        """The vertex codes from the U-Net's output features ``trunk`` (N, channels): the head, and with
+        landmarks the landmark fields and positions appended (see ``forward``)."""
+        z = self.head(trunk)
         if self.config.landmarks:
             if fields is None or fields.shape != (len(z), self.config.landmarks):
                 raise ValueError(f"a model with landmarks={self.config.landmarks} needs fields of shape "
                                  f"({len(z)}, {self.config.landmarks})")
             z = LandmarkDecoder.codes(z, fields, h.graphs[0].pos)
-        if pairs is None:
-            return z
-        pairs = pairs.long()
-        return self.distance(z[pairs[:, 0]], z[pairs[:, 1]])
+        return z
 
     def _unet(self, h: Hierarchy) -> Tensor:
         g = h.graphs[0]

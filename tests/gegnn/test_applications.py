@@ -186,7 +186,8 @@ def test_finetune_lowers_the_held_out_error():
     m = trimesh.creation.icosphere(3)
     v = np.asarray(m.vertices) * [1.0, 0.5, 0.3]  # a flat ellipsoid, far from the paper model's error floor
     model = GeGnn.pretrained("paper")
-    r = model.finetune(v, m.faces, sources=8, held_out=4, steps=3, decoder_steps=200, pairs_per_step=4096)
+    r = model.finetune(v, m.faces, sources=8, held_out=4, decoder_steps=100, head_steps=100, steps=2,
+                       pairs_per_step=4096)
     assert len(set(r.train_sources) | set(r.held_out_sources)) == 12
     assert r.mre_after < 0.8 * r.mre_before
     assert not model.training
@@ -210,7 +211,7 @@ def test_finetune_command_writes_a_checkpoint(ellipsoid_obj, tmp_path):
     path, _ = ellipsoid_obj
     out = tmp_path / "tuned.safetensors"
     result = CliRunner().invoke(main, ["finetune", "--pretrained", "paper", path, "-o", str(out), "--sources", "6",
-                                       "--held-out", "2", "--steps", "1", "--decoder-steps", "20"])
+                                       "--held-out", "2", "--steps", "1", "--decoder-steps", "20", "--head-steps", "20"])
     assert result.exit_code == 0, result.output
     assert "held-out MRE" in result.output
     meta = load_checkpoint(out).metadata
