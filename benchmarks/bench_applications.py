@@ -1,7 +1,7 @@
 """The paper's applications measured on the validation meshes (docs/applications.md).
 
     python benchmarks/bench_applications.py data/val.zarr [--only paths logmap triangle finetune d2]
-        [--out docs/img] [--meshes 19] [--finetune-meshes 5]
+        [--meshes 19] [--finetune-meshes 5] [--out /tmp] [--triangle-md runs/triangle.md]
 
 - paths: predicted path length / potpourri3d's exact edge-flip path length, and / the exact distance,
   over 8 random pairs per mesh (shipped landmark model);
@@ -11,8 +11,11 @@
   both shipped models and the heat method (potpourri3d, d(a, b) read from a's field);
 - finetune: held-out MRE before and after `finetune` with the command's defaults, and CPU seconds;
 - d2: shape distributions of a validation mesh and a bent copy (geodata augment's bend), predicted
-  geodesic against Euclidean.
-Pictures go to --out. One torch thread (the development CPU has 2 cores).
+  geodesic against Euclidean;
+- biharmonic (only when asked, with --biharmonic CKPT): exact | predicted | error from one source on
+  three meshes.
+One torch thread (the development CPU has 2 cores). The pictures of docs/applications.md come from
+the commands written there.
 """
 from __future__ import annotations
 
@@ -86,7 +89,7 @@ def bench_logmap(store, n, out):
           f"(median {np.median(exact_diffs):.4f})")
 
 
-def bench_triangle(store, n, out):
+def bench_triangle(store, n, out, markdown=None):
     import potpourri3d as pp
 
     models = {name: GeGnn.pretrained(name) for name in ("landmark", "paper")}
@@ -104,11 +107,15 @@ def bench_triangle(store, n, out):
         rows["heat method"].append(triangle_violations(lambda i, j: heat[row[i], j], len(v), 400_000, k, pool))
         print(f"triangle {mesh_id}: " + ", ".join(f"{m} {100 * r[-1].fraction:.2f}%" for m, r in rows.items()),
               flush=True)
-    print("triangle inequality, random triples of 64 vertices per mesh:")
+    table = ["| distance | violating triples (mean over meshes) | mean excess of those | max excess |",
+             "|---|---:|---:|---:|"]
     for name, reports in rows.items():
-        print(f"  {name}: violating {100 * np.mean([r.fraction for r in reports]):.3f}% of triples; excess of "
-              f"the violating: mean {np.mean([r.mean_excess for r in reports if r.fraction]):.2e}, max "
-              f"{max(r.max_excess for r in reports):.2e}")
+        table.append(f"| {name} | {100 * np.mean([r.fraction for r in reports]):.2f}% | "
+                     f"{100 * np.mean([r.mean_excess for r in reports if r.fraction]):.2f}% | "
+                     f"{100 * max(r.max_excess for r in reports):.1f}% |")
+    print("triangle inequality, random triples of 64 vertices per mesh:\n" + "\n".join(table))
+    if markdown:
+        Path(markdown).write_text("\n".join(table) + "\n")
 
 
 def bench_finetune(store, n, out, names=("paper", "landmark")):
@@ -146,22 +153,52 @@ def bench_d2(store, n, out):
         trimesh.Trimesh(verts, f, process=False).export(Path(out) / name)
 
 
+def bench_biharmonic(store, n, out, checkpoint=None, picture=None):
+    """Exact | predicted | relative error of the biharmonic distance from one source on three meshes."""
+    from geodata.biharmonic import biharmonic_distances
+    from gegnn.render import Panel, Row, save_panels
+
+    model = GeGnn.from_checkpoint(checkpoint)
+    rows = []
+    for mesh_id, v, f in meshes(store, 100):
+        if not mesh_id.startswith(("cow-8834713b", "hand_closed", "dragon-4af53808")):
+            continue
+        exact = biharmonic_distances(Mesh(v, f), np.array([0]))[0]
+        pred = model.embed(v, f).field(0)
+        err = np.abs(pred - exact) / (exact + 1e-3)
+        err[0] = 0
+        top = float(exact.max())
+        print(f"biharmonic {mesh_id}: MRE from vertex 0 {100 * err[1:].mean():.2f}%")
+        rows.append(Row(v, f, 0, [Panel(exact, "exact biharmonic", vmin=0, vmax=top),
+                                  Panel(pred, "predicted", vmin=0, vmax=top),
+                                  Panel(err, "relative error", "magma", "|pred - exact| / exact", 0, 0.5,
+                                        isolines=0)]))
+    if picture:
+        save_panels(picture, rows, suptitle="biharmonic GeGnn (not shipped)")
+
+
 BENCHES = {"paths": bench_paths, "logmap": bench_logmap, "triangle": bench_triangle, "finetune": bench_finetune,
-           "d2": bench_d2}
+           "d2": bench_d2, "biharmonic": bench_biharmonic}
 
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("store")
-    ap.add_argument("--only", nargs="+", choices=list(BENCHES), default=list(BENCHES))
+    ap.add_argument("--only", nargs="+", choices=list(BENCHES), default=[b for b in BENCHES if b != "biharmonic"])
     ap.add_argument("--meshes", type=int, default=19)
     ap.add_argument("--finetune-meshes", type=int, default=5)
-    ap.add_argument("--out", default="/tmp")
+    ap.add_argument("--out", default="/tmp", help="where the D2 meshes (camel and bent camel OBJ) go")
+    ap.add_argument("--triangle-md", help="also write the triangle-inequality table here (markdown), for "
+                                          "bench_results.py --triangle")
+    ap.add_argument("--biharmonic", help="checkpoint of a biharmonic model, for --only biharmonic")
+    ap.add_argument("--biharmonic-png", help="its exact | predicted | error picture")
     args = ap.parse_args()
     torch.set_num_threads(1)
     for name in args.only:
         t0 = time.perf_counter()
-        BENCHES[name](args.store, args.finetune_meshes if name == "finetune" else args.meshes, args.out)
+        extra = {"triangle": {"markdown": args.triangle_md},
+                 "biharmonic": {"checkpoint": args.biharmonic, "picture": args.biharmonic_png}}.get(name, {})
+        BENCHES[name](args.store, args.finetune_meshes if name == "finetune" else args.meshes, args.out, **extra)
         print(f"[{name}: {time.perf_counter() - t0:.0f} s]", flush=True)
 
 

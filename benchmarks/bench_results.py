@@ -156,6 +156,8 @@ def main():
     ap.add_argument("--meshes", help="only these meshes (comma-separated ids; default: all)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--ablation", help="markdown table of benchmarks/ablation_landmarks.py to include")
+    ap.add_argument("--triangle", help="markdown table of benchmarks/bench_applications.py --only triangle "
+                                       "--triangle-md FILE to include")
     args = ap.parse_args()
     torch.set_num_threads(os.cpu_count() or 1)
 
@@ -220,7 +222,8 @@ def write_report(path, args, rows, times, speedup, largest, grid_ids):
         "```",
         f"python benchmarks/bench_results.py {args.store}"
         + (f" --checkpoint {args.checkpoint}" if args.checkpoint else "")
-        + (f" --ablation {args.ablation}" if args.ablation else ""),
+        + (f" --ablation {args.ablation}" if args.ablation else "")
+        + (f" --triangle {args.triangle}" if args.triangle else ""),
         "```",
         "",
         f"with {ckpt} and the shipped paper model (`GeGnn.pretrained(\"paper\")`), on the validation store "
@@ -259,6 +262,13 @@ def write_report(path, args, rows, times, speedup, largest, grid_ids):
                   "steps on one thread, a 3,000-step decoder warm-up where it has one, then one epoch of 91 "
                   "network steps at lr 1e-3; all stored pairs of the validation meshes, mean over meshes. "
                   "CPU min counts the warm-up.", "", Path(args.ablation).read_text().strip()]
+    if args.triangle:
+        lines += ["", "## Triangle inequality", "",
+                  "A learned distance is not a metric by construction (the paper's limitations). Per mesh, 64 "
+                  "random vertices and all their triples (400k samples); a triple violates the inequality when "
+                  "d(p, q) > d(p, x) + d(x, q) by more than 1e-6 relative (`gegnn.statistics.triangle_violations`"
+                  "; `python benchmarks/bench_applications.py data/val.zarr --only triangle --triangle-md FILE`).",
+                  "", Path(args.triangle).read_text().strip()]
     if grid_ids:
         lines += ["", "## Predicted vs exact", "",
                   "One stored source per mesh (red dot); the error panels' scale stops at 10%.", "",

@@ -21,5 +21,5 @@ OMP_NUM_THREADS=1 gegnn train "$data/train.zarr" --run "$runs/bih" $common --epo
 
 # 2. The landmark model (heat-method *geodesic* landmark fields), its decoder re-fitted: 18.6% after
 #    the warm-up (stopped there).
-OMP_NUM_THREADS=1 gegnn train "$data/train.zarr" --run "$runs/bih-lm" $common --epochs 2 --lr 3e-4 \
+OMP_NUM_THREADS=1 gegnn train "$data/train.zarr" --run "$runs/bih-lm" $common --epochs 1 --lr 3e-4 \
     --init gegnn/weights/gegnn-landmark-v1.safetensors
