@@ -445,7 +445,10 @@ def texture(files, pretrained, center, radius, squares, compare, output, prepare
     panels = [("log map from distance queries", uv)]
     if compare:
         from .logmap import vector_heat_log_map
-        ref, diff = vector_heat_log_map(qm.mesh.vertices, qm.mesh.faces, lm)
+        try:
+            ref, diff = vector_heat_log_map(qm.mesh.vertices, qm.mesh.faces, lm)
+        except ValueError as exc:
+            raise click.ClickException(f"{mesh_path}: --compare: {exc} (--prepare makes a clean mesh)") from None
         click.echo(f"{name}: vs the vector-heat log map: mean |difference| {diff:.4f} of the radius "
                    f"(after the best rotation of the tangent frames)")
         full = np.full_like(uv, np.nan)

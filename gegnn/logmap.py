@@ -58,7 +58,8 @@ def _stencil(topology, center: int, rings: int) -> np.ndarray:
 
 
 def log_map(topology, distance, center: int, radius: float | None = None, rings: int = 2) -> LogMap:
-    """Log-map coordinates around ``center`` of the vertices with d(center, v) <= ``radius``.
+    """Log-map coordinates around ``center`` of the vertices of its connected part with
+    d(center, v) <= ``radius``.
 
     Args:
         topology: :class:`gegnn.paths.SurfaceTopology` of the mesh.
@@ -76,8 +77,11 @@ def log_map(topology, distance, center: int, radius: float | None = None, rings:
     planar = offsets @ frame.T
     # each stencil point at its true distance from the center, in its projected direction
     q = planar * (np.linalg.norm(offsets, axis=1) / np.maximum(np.linalg.norm(planar, axis=1), 1e-300))[:, None]
+    from geodata.mesh import Mesh, vertex_components
+
+    labels = vertex_components(Mesh(V, topology.faces))
     r_all = distance(np.full(len(V), center), np.arange(len(V)))
-    inside = np.isfinite(r_all) & (r_all <= (np.inf if radius is None else radius))
+    inside = np.isfinite(r_all) & (r_all <= (np.inf if radius is None else radius)) & (labels == labels[center])
     inside[center] = True
     vertices = np.flatnonzero(inside)
     r = r_all[vertices]
@@ -93,12 +97,17 @@ def log_map(topology, distance, center: int, radius: float | None = None, rings:
 def vector_heat_log_map(vertices, faces, reference: LogMap) -> tuple[np.ndarray, float]:
     """potpourri3d's vector-heat log map (Sharp et al. 2019) at ``reference``'s center and vertices,
     rotated onto ``reference``'s tangent frame (the rotation that fits best: the two methods pick
-    their u axes differently), and the mean |difference| of the two over the radius."""
+    their u axes differently), and the mean |difference| of the two over the radius, where both are
+    defined (the vector heat method gives NaN on meshes it cannot handle, e.g. non-manifold ones: a
+    ValueError when that is everywhere)."""
     import potpourri3d as pp
 
     solver = pp.MeshVectorHeatSolver(np.asarray(vertices, dtype=np.float64), np.asarray(faces))
     theirs = solver.compute_log_map(reference.center)[reference.vertices]
-    u, _, vt = np.linalg.svd(theirs.T @ reference.uv)  # orthogonal Procrustes
+    ok = np.isfinite(theirs).all(axis=1)
+    if ok.sum() < 2:
+        raise ValueError("the vector heat method gives no log map on this mesh")
+    u, _, vt = np.linalg.svd(theirs[ok].T @ reference.uv[ok])  # orthogonal Procrustes
     rotation = u @ np.diag([1.0, np.sign(np.linalg.det(u @ vt))]) @ vt
     aligned = theirs @ rotation
-    return aligned, float(np.linalg.norm(aligned - reference.uv, axis=1).mean() / reference.radius)
+    return aligned, float(np.linalg.norm(aligned[ok] - reference.uv[ok], axis=1).mean() / reference.radius)

@@ -112,6 +112,13 @@ def test_log_map_on_a_plane_is_the_polar_coordinates():
     assert np.abs(lm.uv - expected).max() < 1e-5
 
 
+def test_log_map_stays_on_the_center_part():
+    v, f = plane(n=11, jitter=0)
+    two_v, two_f = np.r_[v, v + [0, 0, 0.01]], np.r_[f, f + len(v)]  # a second sheet 0.01 above
+    lm = euclidean_embedding(two_v, two_f).log_map(60, 0.5)
+    assert len(lm.vertices) and lm.vertices.max() < len(v)
+
+
 def test_log_map_on_a_sphere(sphere):
     v, f = sphere
     c = 10
