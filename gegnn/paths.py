@@ -74,7 +74,7 @@ class SurfaceTopology:
 
 
 class _LazyField:
-    """Field values computed on first use, a vertex at a time batch."""
+    """Field values computed on first use, for the missing vertices of each request in one batch."""
 
     def __init__(self, fn, n: int):
         self.fn, self.values = fn, np.full(n, np.nan)
