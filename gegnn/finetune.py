@@ -22,11 +22,12 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 import torch
 
-from .train import relative_error
+from .train import fit_pairs, pair_errors, relative_error
 
 __all__ = ["FinetuneResult", "finetune", "split_sources"]
 
@@ -63,15 +64,6 @@ def _pairs(sources: np.ndarray, fields: np.ndarray) -> tuple[torch.Tensor, torch
     return torch.as_tensor(pairs), torch.as_tensor(fields[s_idx, v_idx], dtype=torch.float32)
 
 
-@torch.no_grad()
-def _mre(model, h, fields, pairs, dists, chunk: int = 1 << 16) -> float:
-    model.eval()
-    z = model(h, fields=fields)
-    errs = [relative_error(model.distance(z[p[:, 0]], z[p[:, 1]]), d)
-            for p, d in zip(pairs.split(chunk), dists.split(chunk))]
-    return float(torch.cat(errs).mean())
-
-
 def finetune(model, vertices, faces, sources: int = 64, held_out: int = 8, steps: int = 0,
              decoder_steps: int = 300, head_steps: int = 1500, lr: float = 1e-3, head_lr: float = 3e-3,
              pairs_per_step: int = 20_000, seed: int = 0, progress: bool = False) -> FinetuneResult:
@@ -80,8 +72,6 @@ def finetune(model, vertices, faces, sources: int = 64, held_out: int = 8, steps
     Raises :class:`geodata.mesh.MeshError` where the exact solver cannot take the mesh (non-manifold
     edges) or dies on it.
     """
-    from tqdm import tqdm
-
     from geodata.mesh import Mesh, vertex_components
 
     from .query import exact_fields
@@ -96,42 +86,33 @@ def finetune(model, vertices, faces, sources: int = 64, held_out: int = 8, steps
     held_pairs, held_d = _pairs(held_src, exact[sources:])
     train_pairs, train_d, held_pairs, held_d = (t.to(device) for t in (train_pairs, train_d, held_pairs, held_d))
     t1 = time.perf_counter()
-    before = _mre(model, h, lm_fields, held_pairs, held_d)
-    generator = torch.Generator().manual_seed(seed)
-    losses = []
-
-    def fit(params, n_steps, base_lr, loss_fn, desc):
-        optimizer = torch.optim.AdamW(params, lr=base_lr, weight_decay=0.0)
-        for step in tqdm(range(n_steps), desc=desc, leave=False, disable=not progress, dynamic_ncols=True):
-            for group in optimizer.param_groups:
-                group["lr"] = base_lr * (1 - step / n_steps)
-            pick = torch.randint(len(train_pairs), (pairs_per_step,), generator=generator).to(device)
-            loss = loss_fn(train_pairs[pick], train_d[pick])
-            optimizer.zero_grad(set_to_none=True)
-            loss.backward()
-            optimizer.step()
-            losses.append(loss.item())
-
     model.eval()
     with torch.no_grad():
         trunk = model._unet(h)
         codes = model.codes(trunk, h, lm_fields)
+        before = float(pair_errors(model.distance, codes, held_pairs, held_d).mean())
     model.train()
+
+    def pair_loss(z, pick):
+        p = train_pairs[pick]
+        return relative_error(model.distance(z[p[:, 0]], z[p[:, 1]]), train_d[pick]).mean()
+
+    generator = torch.Generator().manual_seed(seed)
+    fit = partial(fit_pairs, n_pairs=len(train_pairs), pairs_per_step=pairs_per_step, generator=generator,
+                  device=device, progress=progress)
+    losses = []
     if decoder_steps:
-        fit(list(model.distance.parameters()), decoder_steps, head_lr,
-            lambda p, d: relative_error(model.distance(codes[p[:, 0]], codes[p[:, 1]]), d).mean(),
-            "finetune: decoder")
+        losses += fit(list(model.distance.parameters()), lambda pick: pair_loss(codes, pick),
+                      steps=decoder_steps, lr=head_lr, desc="finetune: decoder")
     if head_steps:
-        def head_loss(p, d):
-            z = model.codes(trunk, h, lm_fields)
-            return relative_error(model.distance(z[p[:, 0]], z[p[:, 1]]), d).mean()
-        fit(list(model.head.parameters()) + list(model.distance.parameters()), head_steps, head_lr, head_loss,
-            "finetune: head")
+        losses += fit(list(model.head.parameters()) + list(model.distance.parameters()),
+                      lambda pick: pair_loss(model.codes(trunk, h, lm_fields), pick),
+                      steps=head_steps, lr=head_lr, desc="finetune: head")
     if steps:
-        model.train()
-        fit(list(model.parameters()), steps, lr,
-            lambda p, d: relative_error(model(h, p, lm_fields), d).mean(), "finetune: network")
+        losses += fit(list(model.parameters()), lambda pick: pair_loss(model(h, fields=lm_fields), pick),
+                      steps=steps, lr=lr, desc="finetune: network")
     model.zero_grad(set_to_none=True)
-    after = _mre(model, h, lm_fields, held_pairs, held_d)
     model.eval()
+    with torch.no_grad():
+        after = float(pair_errors(model.distance, model(h, fields=lm_fields), held_pairs, held_d).mean())
     return FinetuneResult(before, after, train_src, held_src, t1 - t0, time.perf_counter() - t1, losses)

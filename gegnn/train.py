@@ -148,6 +148,36 @@ def validate(model, dataset: BatchDataset, mesh_ids, device, ctx: Dist) -> float
     return err / count if count else float("nan")
 
 
+def fit_pairs(params, loss_fn, n_pairs: int, steps: int, lr: float, pairs_per_step: int,
+              generator: torch.Generator, device, desc: str, progress: bool = True) -> list[float]:
+    """``steps`` AdamW steps (no weight decay) on ``params``, each on the loss ``loss_fn(indices)`` of
+    ``pairs_per_step`` random indices into ``n_pairs`` pairs, the learning rate decaying linearly from
+    ``lr`` to 0. Returns the losses. The loop of the decoder warm-up and of finetuning."""
+    optimizer = torch.optim.AdamW(params, lr=lr, weight_decay=0.0)
+    losses = []
+    bar = tqdm(range(steps), desc=desc, leave=False, disable=not progress, dynamic_ncols=True)
+    for step in bar:
+        for group in optimizer.param_groups:
+            group["lr"] = lr * (1 - step / steps)
+        pick = torch.randint(n_pairs, (pairs_per_step,), generator=generator).to(device)
+        loss = loss_fn(pick)
+        optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        optimizer.step()
+        losses.append(loss.item())
+        if step % 100 == 0:
+            bar.set_postfix(mre=f"{losses[-1]:.4f}")
+    return losses
+
+
+def pair_errors(distance, codes: torch.Tensor, pairs: torch.Tensor, targets: torch.Tensor,
+                chunk: int = 65536) -> torch.Tensor:
+    """Relative errors (P,) of the decoder ``distance`` on ``pairs`` (P, 2) of vertex ``codes``, decoded
+    ``chunk`` pairs at a time."""
+    return torch.cat([relative_error(distance(codes[p[:, 0]], codes[p[:, 1]]), d)
+                      for p, d in zip(pairs.split(chunk), targets.split(chunk))])
+
+
 def warm_decoder(model, dataset: BatchDataset, mesh_ids, steps: int, lr: float, device, log,
                  pairs_per_step: int = 16384) -> None:
     """Train the decoder alone on the frozen network's codes of every training mesh.
@@ -167,24 +197,14 @@ def warm_decoder(model, dataset: BatchDataset, mesh_ids, steps: int, lr: float, 
             dists.append(batch.distances)
             offset += len(z)
     codes, pairs, dists = torch.cat(codes), torch.cat(pairs), torch.cat(dists)
-    params = list(model.distance.parameters())
-    optimizer = torch.optim.AdamW(params, lr=lr, weight_decay=0.0)
-    generator = torch.Generator().manual_seed(0)
     model.train()
-    losses = []
-    bar = tqdm(range(steps), desc="decoder warm-up", leave=False, dynamic_ncols=True)
-    for step in bar:
-        for group in optimizer.param_groups:
-            group["lr"] = lr * (1 - step / steps)
-        pick = torch.randint(len(pairs), (pairs_per_step,), generator=generator).to(device)
+
+    def loss(pick):
         p = pairs[pick]
-        loss = relative_error(model.distance(codes[p[:, 0]], codes[p[:, 1]]), dists[pick]).mean()
-        optimizer.zero_grad(set_to_none=True)
-        loss.backward()
-        optimizer.step()
-        losses.append(loss.item())
-        if step % 100 == 0:
-            bar.set_postfix(mre=f"{loss.item():.4f}")
+        return relative_error(model.distance(codes[p[:, 0]], codes[p[:, 1]]), dists[pick]).mean()
+
+    losses = fit_pairs(list(model.distance.parameters()), loss, len(pairs), steps, lr, pairs_per_step,
+                       torch.Generator().manual_seed(0), device, "decoder warm-up")
     model.zero_grad(set_to_none=True)
     log.info(f"decoder warm-up: {steps} steps on {len(mesh_ids)} meshes' codes, MRE {losses[0]:.4f} -> "
              f"{sum(losses[-50:]) / len(losses[-50:]):.4f}")
@@ -403,8 +423,7 @@ def evaluate_store(model: GeGnn, store_path, distance: str = "geodesic", mesh_id
     for mesh_id in tqdm(mesh_ids or dataset.store.mesh_ids, desc="eval", leave=False):
         batch = dataset[(VAL_EPOCH, (mesh_id,))].to(device)
         e = model(batch.hierarchy, fields=batch.fields)
-        err = torch.cat([relative_error(model.distance(e[p[:, 0]], e[p[:, 1]]), d) for p, d in
-                         zip(batch.pairs.split(chunk), batch.distances.split(chunk))])
+        err = pair_errors(model.distance, e, batch.pairs, batch.distances, chunk)
         rows.append(dict(mesh_id=mesh_id, vertices=e.shape[0], pairs=err.numel(), mre=err.mean().item(),
                          sum=err.sum().item()))
     return rows
