@@ -122,27 +122,41 @@ def checkerboard(uv: np.ndarray, square: float) -> np.ndarray:
     return rgba
 
 
-def visible_polyline(vertices, faces, view: View, points: np.ndarray, size: int = 512) -> np.ndarray:
-    """Pixel coordinates (P, 2) of ``points`` on the mesh, NaN where the surface hides them."""
-    face_img, bary, _, depth = rasterize(vertices, faces, view, size)
-    xy, z = project(vertices, view, points, size)
-    px = np.clip(np.round(xy - 0.5).astype(np.int64), 0, size - 1)
+def _depth_tolerance(depth: np.ndarray) -> float:
+    return 0.02 * float(np.ptp(depth))
+
+
+def _surface_depth(raster, faces: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    """Depth of the surface drawn at the pixels of ``xy`` (P, 2) (-inf where the background shows)."""
+    face_img, bary, _, depth = raster
+    size = face_img.shape[0]
+    px = np.clip(np.floor(xy), 0, size - 1).astype(np.int64)
     f = face_img[px[:, 1], px[:, 0]]
-    surface = np.where(f >= 0, (depth[faces[np.maximum(f, 0)]] * bary[px[:, 1], px[:, 0]]).sum(axis=1), -np.inf)
-    hidden = z < surface - 0.02 * np.ptp(depth)
+    drawn = (depth[faces[np.maximum(f, 0)]] * bary[px[:, 1], px[:, 0]]).sum(axis=1)
+    return np.where(f >= 0, drawn, -np.inf)
+
+
+def visible_polyline(vertices, faces, view: View, points: np.ndarray, size: int = 512, raster=None) -> np.ndarray:
+    """Pixel coordinates (P, 2) of ``points`` on the mesh, NaN where the surface hides them (``raster``:
+    the mesh's :func:`rasterize` in this view, when the caller has it)."""
+    raster = rasterize(vertices, faces, view, size) if raster is None else raster
+    xy, z = project(vertices, view, points, size)
+    hidden = z < _surface_depth(raster, faces, xy) - _depth_tolerance(raster[3])
     return np.where(hidden[:, None], np.nan, xy)
 
 
 def shade_field(vertices, faces, field, view: View, *, size=512, cmap="viridis", vmin=None, vmax=None,
-                isolines: int = 12, marker: int | None = None) -> np.ndarray:
+                isolines: int = 12, marker: int | None = None, raster=None) -> np.ndarray:
     """RGBA image (H, W, 4) of ``field`` (per vertex) with Lambert shading and ``isolines`` levels
     between vmin and vmax; ``marker`` draws a red dot on that vertex when it is visible. A field of
-    (u, v) pairs (N, 2) is drawn as a checkerboard with squares of side ``vmax`` instead."""
+    (u, v) pairs (N, 2) is drawn as a checkerboard with squares of side ``vmax`` instead. ``raster``: the
+    mesh's :func:`rasterize` in this view and size, when the caller has it."""
     import matplotlib
 
     vmin = float(np.nanmin(field)) if vmin is None else vmin
     vmax = float(np.nanmax(field)) if vmax is None else vmax
-    face_img, bary, xy, depth = rasterize(vertices, faces, view, size)
+    raster = rasterize(vertices, faces, view, size) if raster is None else raster
+    face_img, bary, xy, depth = raster
     covered = face_img >= 0
     f = np.where(covered, face_img, 0)
     if field.ndim == 2:  # (u, v) per vertex: a checkerboard texture, interpolated per pixel
@@ -175,12 +189,10 @@ def shade_field(vertices, faces, field, view: View, *, size=512, cmap="viridis",
         r = max(2, size // 120)
         yy, xx = np.mgrid[0:size, 0:size]
         dot = (xx - x) ** 2 + (yy - y) ** 2 <= r * r
-        # Visible when the marker's depth is not far behind the surface drawn at its pixel.
-        px, py = int(np.clip(x, 0, size - 1)), int(np.clip(y, 0, size - 1))
-        if face_img[py, px] >= 0:
-            shown = (depth[faces[face_img[py, px]]] * bary[py, px]).sum()
-            if depth[marker] >= shown - 0.02 * np.ptp(depth):
-                rgba[dot] = (0.85, 0.1, 0.1, 1)
+        # Visible when on the surface and not far behind the surface drawn at its pixel.
+        shown = _surface_depth(raster, faces, xy[[marker]])[0]
+        if np.isfinite(shown) and depth[marker] >= shown - _depth_tolerance(depth):
+            rgba[dot] = (0.85, 0.1, 0.1, 1)
     return rgba
 
 
@@ -224,6 +236,8 @@ def save_panels(path, rows: list[Row], *, suptitle: str | None = None, size: int
     for r, row in enumerate(rows):
         v, f, src = row.vertices, row.faces, row.source
         cam = default_view(v, None if src is None else vertex_normals(Mesh(v, f))[src])
+        raster = rasterize(v, f, cam, size)  # one camera per row: every panel and line shares it
+        lines = [(visible_polyline(v, f, cam, points, size, raster), label) for points, label in row.lines]
         for c in range(ncols):
             ax = axes[r, c]
             ax.set_axis_off()
@@ -233,10 +247,9 @@ def save_panels(path, rows: list[Row], *, suptitle: str | None = None, size: int
             vmin = float(np.min(p.field)) if p.vmin is None else p.vmin
             vmax = float(np.max(p.field)) if p.vmax is None else p.vmax
             ax.imshow(shade_field(v, f, p.field, cam, size=size, cmap=p.cmap, vmin=vmin, vmax=vmax,
-                                   isolines=p.isolines, marker=src))
+                                   isolines=p.isolines, marker=src, raster=raster))
             ax.set_title(p.title, fontsize=10)
-            for (points, label), color, style in zip(row.lines, ("#e8196b", "#ffd400", "#00e5ff"), ("-", "--", ":")):
-                xy = visible_polyline(v, f, cam, points, size)
+            for (xy, label), color, style in zip(lines, ("#e8196b", "#ffd400", "#00e5ff"), ("-", "--", ":")):
                 ax.plot(xy[:, 0], xy[:, 1], style, color=color, lw=1.6, label=label)
             if row.lines and c == 0:
                 ax.legend(loc="lower left", fontsize=7, framealpha=0.7)
