@@ -313,8 +313,6 @@ def _load_mesh(path, prepare):
 
 def _paths(emb, qm, src, dst, path_to, exact_d, name) -> list:
     """Trace the predicted path (and with the exact field, the edge-flip one); report; lines to draw."""
-    import numpy as np
-
     try:
         path = emb.path(src, dst)
     except ValueError as exc:
@@ -324,13 +322,13 @@ def _paths(emb, qm, src, dst, path_to, exact_d, name) -> list:
                f"distance {float(emb.distance(src, dst)):.4g}{note}")
     lines = [(path.points, f"predicted path ({path.length:.3g})")]
     if exact_d is not None and dst != src:
-        import potpourri3d as pp
+        from geodata.geodesic import edge_flip_paths, polyline_length
         try:
-            flip = pp.EdgeFlipGeodesicSolver(qm.mesh.vertices, qm.mesh.faces).find_geodesic_path(src, dst)
+            flip = edge_flip_paths(qm.mesh, [(src, dst)])[0]
         except (RuntimeError, ValueError) as exc:
             click.echo(f"{name}: no edge-flip path: {exc}")
         else:
-            flip_len = float(np.linalg.norm(np.diff(flip, axis=0), axis=1).sum())
+            flip_len = polyline_length(flip)
             click.echo(f"{name}: exact distance {exact_d[dst]:.4g}; edge-flip path length {flip_len:.4g}; "
                        f"predicted path / edge-flip path {path.length / flip_len:.4f}")
             lines.append((flip, f"exact path ({flip_len:.3g})"))

@@ -42,7 +42,8 @@ class Path:
 
     @property
     def length(self) -> float:
-        return float(np.linalg.norm(np.diff(self.points, axis=0), axis=1).sum())
+        from geodata.geodesic import polyline_length
+        return polyline_length(self.points)
 
 
 class SurfaceTopology:

@@ -19,7 +19,8 @@ import numpy as np
 
 from geodata.mesh import Mesh, MeshError, closed_manifold_problem, vertex_components
 
-__all__ = ["BACKENDS", "geodesic_solver", "exact_geodesic_distances", "sample_sources", "exact_geodesic_pairs"]
+__all__ = ["BACKENDS", "geodesic_solver", "exact_geodesic_distances", "sample_sources", "exact_geodesic_pairs",
+           "polyline_length", "edge_flip_paths"]
 
 BACKENDS = ("vtp", "gdist", "libigl")
 
@@ -54,6 +55,24 @@ def geodesic_solver(mesh: Mesh, backend: str = "vtp") -> Callable[[int], np.ndar
 def exact_geodesic_distances(mesh: Mesh, source: int, backend: str = "vtp") -> np.ndarray:
     """Exact geodesic distance (float64, (N,)) from vertex `source` to every vertex (see `geodesic_solver`)."""
     return geodesic_solver(mesh, backend)(source)
+
+
+def polyline_length(points: np.ndarray) -> float:
+    """Length of the polyline through ``points`` (K, 3)."""
+    return float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum())
+
+
+def edge_flip_paths(mesh: Mesh, pairs, converged: bool = False) -> list[np.ndarray]:
+    """Locally shortest surface paths (polylines (K, 3)) between the vertex ``pairs`` (P, 2), by
+    potpourri3d's edge flips (FlipOut, Sharp & Crane 2020), one solver for all pairs. They are real
+    surface paths, so their lengths bound the geodesic distance from above, and on the meshes here
+    they reach it. ``converged``: flip until no flip shortens a path (potpourri3d stops earlier by
+    default)."""
+    import potpourri3d as pp3d
+
+    solver = pp3d.EdgeFlipGeodesicSolver(mesh.vertices, mesh.faces)
+    options = dict(max_iterations=100000, max_relative_length_decrease=0.0) if converged else {}
+    return [solver.find_geodesic_path(int(s), int(t), **options) for s, t in pairs]
 
 
 def sample_sources(labels: np.ndarray, n_pairs: int, rng: np.random.Generator) -> np.ndarray:
