@@ -33,7 +33,7 @@ from gegnn import GeGnn
 from gegnn.finetune import finetune
 from gegnn.logmap import log_map, vector_heat_log_map
 from gegnn.query import exact_fields
-from gegnn.statistics import histogram_l1, sample_pairs, shape_distribution, triangle_violations
+from gegnn.statistics import geodesic_and_euclidean_d2, histogram_l1, triangle_violations
 
 NORMALIZED_RADIUS = 0.3
 
@@ -142,11 +142,8 @@ def bench_d2(store, n, out, angle=np.pi):
     for mesh_id, v, f in meshes(store, n):
         frame = np.linalg.eigh(np.cov(v.T))[1][:, [2, 0, 1]]  # longest, thinnest, middle
         bent = bend(v, frame, angle)
-        hists = []
-        for verts in (v, bent):
-            p = sample_pairs(verts, f, 1_000_000, 0)
-            hists.append((shape_distribution(model.embed(verts, f).distance(p[:, 0], p[:, 1])),
-                          shape_distribution(np.linalg.norm(verts[p[:, 0]] - verts[p[:, 1]], axis=1))))
+        hists = [geodesic_and_euclidean_d2(model.embed(verts, f).distance, verts, f, 1_000_000)
+                 for verts in (v, bent)]
         rows.append((histogram_l1(hists[0][0], hists[1][0]), histogram_l1(hists[0][1], hists[1][1])))
         print(f"d2 {mesh_id} vs bent by {np.degrees(angle):.0f} degrees: L1 geodesic {rows[-1][0]:.3f}, "
               f"Euclidean {rows[-1][1]:.3f}", flush=True)

@@ -474,8 +474,9 @@ def texture(files, pretrained, center, radius, squares, compare, output, prepare
 @click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True)
 def shape_distribution(files, pretrained, pairs, bins, seed, output, device):
     """Shape distributions (D2, Osada et al. 2002) of each MESH with predicted geodesic distances, next to
-    the Euclidean ones: histograms of the distance between random surface points over its mean. With
-    several meshes, the L1 distance of each histogram to the first mesh's (0: equal, 2: disjoint).
+    the Euclidean ones: histograms of the distance between random surface points (of a mesh's largest
+    part) over its mean. With several meshes, the L1 distance of each histogram to the first mesh's
+    (0: equal, 2: disjoint).
 
     \b
     Examples:
@@ -484,8 +485,8 @@ def shape_distribution(files, pretrained, pairs, bins, seed, output, device):
     """
     import numpy as np
 
-    from .statistics import histogram_l1, sample_pairs, shape_distribution as histogram
-    from .query import source_part
+    from .query import largest_part
+    from .statistics import geodesic_and_euclidean_d2, histogram_l1
 
     spec, meshes = _model_and_meshes(files, pretrained, many=True)
     suffix = _output_suffix(output, (".png", ".csv"))
@@ -494,10 +495,7 @@ def shape_distribution(files, pretrained, pairs, bins, seed, output, device):
     for path in meshes:
         qm = _load_mesh(path, False)
         v, f = qm.mesh.vertices, qm.mesh.faces
-        part = source_part(qm.mesh, int(np.argmax(np.bincount(f.ravel(), minlength=len(v)))))[0]
-        p = sample_pairs(v, f, pairs, seed, part)
-        geo = histogram(model.embed(v, f).distance(p[:, 0], p[:, 1]), bins)
-        euc = histogram(np.linalg.norm(v[p[:, 0]] - v[p[:, 1]], axis=1), bins)
+        geo, euc = geodesic_and_euclidean_d2(model.embed(v, f).distance, v, f, pairs, seed, bins, largest_part(qm.mesh))
         results.append((Path(path).name, geo, euc))
         line = f"{Path(path).name}: mean geodesic {geo.mean:.4g}, mean Euclidean {euc.mean:.4g}"
         if len(results) > 1:

@@ -46,10 +46,10 @@ class FinetuneResult:
     losses: list[float] = field(default_factory=list)
 
 
-def split_sources(labels: np.ndarray, n_train: int, n_held_out: int, seed: int = 0):
-    """Random distinct sources, ``n_train`` for training and ``n_held_out`` held out, all on the largest
-    connected part (the others have no distances to the first's vertices)."""
-    part = np.flatnonzero(labels == np.bincount(labels).argmax())
+def split_sources(part: np.ndarray, n_train: int, n_held_out: int, seed: int = 0):
+    """Random distinct sources among the vertices where ``part`` is True (the largest connected part: the
+    others have no distances to its vertices), ``n_train`` for training and ``n_held_out`` held out."""
+    part = np.flatnonzero(part)
     if n_train + n_held_out > len(part):
         raise ValueError(f"{n_train} + {n_held_out} sources asked for, the mesh's largest part has "
                          f"{len(part)} vertices")
@@ -72,15 +72,15 @@ def finetune(model, vertices, faces, sources: int = 64, held_out: int = 8, steps
     Raises :class:`geodata.mesh.MeshError` where the exact solver cannot take the mesh (non-manifold
     edges) or dies on it.
     """
-    from geodata.mesh import Mesh, vertex_components
+    from geodata.mesh import Mesh
 
-    from .query import exact_fields
+    from .query import exact_fields, largest_part
 
     t0 = time.perf_counter()
     device = next(model.parameters()).device
     h, lm_fields, scale = model.inputs(vertices, faces, device)
     mesh = Mesh(np.asarray(vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64))
-    train_src, held_src = split_sources(vertex_components(mesh), sources, held_out, seed)
+    train_src, held_src = split_sources(largest_part(mesh), sources, held_out, seed)
     exact = exact_fields(mesh, np.concatenate([train_src, held_src])) / scale  # normalized units
     train_pairs, train_d = _pairs(train_src, exact[:sources])
     held_pairs, held_d = _pairs(held_src, exact[sources:])

@@ -18,7 +18,7 @@ from geodata.mesh import Mesh, MeshError, edge_face_counts, vertex_components
 from .train import METRIC_EPS
 
 __all__ = ["QueryMesh", "load_query_mesh", "exact_field", "exact_fields", "relative_errors", "read_pairs",
-           "source_part", "resolution_note"]
+           "source_part", "largest_part", "resolution_note"]
 
 
 
@@ -118,6 +118,12 @@ def source_part(mesh: Mesh, source: int) -> tuple[np.ndarray, int]:
     """Vertices on the source's connected part (bool (N,)) and how many parts the mesh has."""
     labels = vertex_components(mesh)
     return labels == labels[source], int(labels.max()) + 1
+
+
+def largest_part(mesh: Mesh) -> np.ndarray:
+    """Vertices on the mesh's largest connected part (most vertices), bool (N,)."""
+    labels = vertex_components(mesh)
+    return labels == np.bincount(labels).argmax()
 
 
 def relative_errors(pred: np.ndarray, exact: np.ndarray, scale: float, source: int) -> np.ndarray:

@@ -17,21 +17,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["vertex_areas", "sample_pairs", "ShapeDistribution", "shape_distribution", "histogram_l1",
+__all__ = ["sample_pairs", "ShapeDistribution", "shape_distribution", "geodesic_and_euclidean_d2", "histogram_l1",
            "TriangleReport", "triangle_violations"]
 
 
-def vertex_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """A third of the area of the faces around each vertex (barycentric cells)."""
-    tri = vertices[faces]
-    area = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1) / 2
-    return np.bincount(faces.ravel(), np.repeat(area / 3, 3), minlength=len(vertices))
-
-
 def sample_pairs(vertices, faces, n_pairs: int, seed: int = 0, part: np.ndarray | None = None) -> np.ndarray:
-    """(n_pairs, 2) vertex pairs, each vertex drawn with probability proportional to its area (within the
-    vertices where ``part`` is True, when given)."""
-    weights = vertex_areas(np.asarray(vertices, dtype=np.float64), np.asarray(faces))
+    """(n_pairs, 2) vertex pairs, each vertex drawn with probability proportional to its area, a third of
+    its faces' (potpourri3d's ``vertex_areas``), within the vertices where ``part`` is True, when given."""
+    import potpourri3d as pp3d
+
+    weights = pp3d.vertex_areas(np.asarray(vertices, dtype=np.float64), np.asarray(faces))
     if part is not None:
         weights = np.where(part, weights, 0.0)
     rng = np.random.default_rng(seed)
@@ -59,6 +54,15 @@ def shape_distribution(distances: np.ndarray, bins: int = 64, max_ratio: float =
     edges = np.linspace(0, max_ratio, bins + 1)
     counts, _ = np.histogram(np.minimum(d / mean, max_ratio), edges)
     return ShapeDistribution(edges, counts / (counts.sum() * np.diff(edges)), mean)
+
+
+def geodesic_and_euclidean_d2(distance, vertices, faces, n_pairs: int, seed: int = 0, bins: int = 64,
+                              part: np.ndarray | None = None) -> tuple[ShapeDistribution, ShapeDistribution]:
+    """The D2 histograms of ``distance(i, j)`` (index arrays) and of the straight-line distance, over the
+    same random pairs (:func:`sample_pairs`)."""
+    p = sample_pairs(vertices, faces, n_pairs, seed, part)
+    straight = np.linalg.norm(vertices[p[:, 0]] - vertices[p[:, 1]], axis=1)
+    return shape_distribution(distance(p[:, 0], p[:, 1]), bins), shape_distribution(straight, bins)
 
 
 def histogram_l1(a: ShapeDistribution, b: ShapeDistribution) -> float:
