@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["LogMap", "log_map", "tangent_frame", "vector_heat_log_map"]
+__all__ = ["LogMap", "log_map", "stencil", "tangent_frame", "vector_heat_log_map"]
 
 
 @dataclass
@@ -48,7 +48,8 @@ def tangent_frame(topology, center: int) -> np.ndarray:
     return np.stack([u, np.cross(n, u)])
 
 
-def _stencil(topology, center: int, rings: int) -> np.ndarray:
+def stencil(topology, center: int, rings: int) -> np.ndarray:
+    """The vertices within ``rings`` edge rings of ``center``, without it, ascending."""
     ring, seen = np.array([center]), {center}
     for _ in range(rings):
         nxt = np.unique(np.concatenate([topology.neighbours(v) for v in ring]))
@@ -72,8 +73,8 @@ def log_map(topology, distance, center: int, radius: float | None = None, rings:
     if not 0 <= center < len(V):
         raise IndexError(f"vertex {center} out of range ({len(V)} vertices)")
     frame = tangent_frame(topology, center)
-    stencil = _stencil(topology, center, rings)
-    offsets = V[stencil] - V[center]
+    near = stencil(topology, center, rings)
+    offsets = V[near] - V[center]
     planar = offsets @ frame.T
     # each stencil point at its true distance from the center, in its projected direction
     q = planar * (np.linalg.norm(offsets, axis=1) / np.maximum(np.linalg.norm(planar, axis=1), 1e-300))[:, None]
@@ -85,7 +86,7 @@ def log_map(topology, distance, center: int, radius: float | None = None, rings:
     inside[center] = True
     vertices = np.flatnonzero(inside)
     r = r_all[vertices]
-    d = distance(np.repeat(stencil[None], len(vertices), 0), np.repeat(vertices[:, None], len(stencil), 1))
+    d = distance(np.repeat(near[None], len(vertices), 0), np.repeat(vertices[:, None], len(near), 1))
     rhs = (r[:, None] ** 2 + (q ** 2).sum(axis=1)[None] - d ** 2) / 2      # (M, K) = q_k . w
     w = rhs @ np.linalg.pinv(q).T                                          # (M, 2)
     norm = np.linalg.norm(w, axis=1)

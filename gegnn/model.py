@@ -180,9 +180,8 @@ class GeGnn(nn.Module):
         """
         from .embedding import Embedding
 
-        vertices, faces = _validated(vertices, faces)
         device = torch.device(device) if device else next(self.parameters()).device
-        h, fields, scale = self.inputs(vertices, faces, device)
+        h, fields, scale = self.inputs(vertices, faces, device)  # validates them
         was_training = self.training
         self.eval()
         with torch.autocast(device.type, dtype=torch.bfloat16, enabled=precision == "bf16"):

@@ -243,9 +243,11 @@ def _finish_on_edges(topology, points, source) -> Path:
     import scipy.sparse
     from scipy.sparse.csgraph import dijkstra
 
+    from geodata.mesh import unique_edges
+
     V, F = topology.vertices, topology.faces
     start = int(np.argmin(np.linalg.norm(V - points[-1], axis=1)))
-    e = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    e = unique_edges(F)  # each edge once: a face list repeating an edge would otherwise sum its lengths
     w = np.linalg.norm(V[e[:, 0]] - V[e[:, 1]], axis=1)
     graph = scipy.sparse.coo_matrix((w, (e[:, 0], e[:, 1])), shape=(len(V), len(V))).tocsr()
     _, pred = dijkstra(graph, directed=False, indices=start, return_predecessors=True)
