@@ -25,11 +25,11 @@ from pathlib import Path
 
 import numpy as np
 import torch
-import zarr
 
 from geodata.geodesic import edge_flip_paths, polyline_length
 from geodata.mesh import Mesh
 from gegnn import GeGnn
+from gegnn.data import GeodesicStore
 from gegnn.finetune import finetune
 from gegnn.logmap import log_map, stencil, vector_heat_log_map
 from gegnn.query import exact_fields
@@ -39,11 +39,11 @@ NORMALIZED_RADIUS = 0.3
 
 
 def meshes(store, n):
-    root = zarr.open_group(store, mode="r")["meshes"]
-    for mesh_id in sorted(root.group_keys())[:n]:
-        g = root[mesh_id]
-        if g.attrs.get("status") == "ok":
-            yield mesh_id, g["vertices"][:].astype(np.float64), g["faces"][:].astype(np.int64)
+    """(mesh id, vertices float64, faces) of the first ``n`` committed meshes of ``store``, by id."""
+    view = GeodesicStore(store)
+    for mesh_id in view.mesh_ids[:n]:
+        g = view.geometry(mesh_id)
+        yield mesh_id, g.vertices.astype(np.float64), g.faces
 
 
 def bench_paths(store, n, out):

@@ -21,12 +21,13 @@ import time
 
 import numpy as np
 import torch
-import zarr
 
 from geodata.geodesic import geodesic_solver
 from geodata.mesh import Mesh
 from gegnn import GeGnn
 from gegnn.query import relative_errors
+
+from bench_applications import meshes  # benchmarks/ is on sys.path when a script there runs
 
 MODELS = ("landmark", "paper")
 
@@ -78,10 +79,7 @@ def main():
     rng = np.random.default_rng(0)
 
     mesh_rows = {0: [], 1: [], 2: []}
-    root = zarr.open_group(args.store, mode="r")["meshes"]
-    for mesh_id in sorted(root.group_keys())[:args.meshes]:
-        g = root[mesh_id]
-        v, f = g["vertices"][:].astype(np.float64), g["faces"][:].astype(np.int64)
+    for mesh_id, v, f in meshes(args.store, args.meshes):
         sources = rng.choice(len(v), args.sources, replace=False)  # subdivision keeps old vertex numbers
         for level in (0, 1, 2):
             if level:
