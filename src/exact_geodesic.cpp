@@ -28,8 +28,8 @@
 //      half-edge and 2.3x gdist's time; with it, 0.8x).
 // Windows wait in buckets of their smallest distance and leave each bucket first in, first out (the
 // fast wavefront of Xu et al. 2015). Since every rule prunes against real paths (rule 4 up to its 3
-// hairs), the order only costs time, never exactness; a saddle or boundary vertex lights the edges opposite it again whenever its
-// distance improves after it did so.
+// hairs), the order only costs time, never exactness; a saddle or boundary vertex lights the edges
+// opposite it again whenever its distance improves after it did so.
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>
 
