@@ -18,7 +18,9 @@
 //      onto edge BC, nor rays through x > sp* onto edge AC (exchange argument at the crossing point).
 //   3. windows on one half-edge: between two crossings of their distance functions (roots of a
 //      quadratic) one window is shorter throughout; each loses the ends of its interval where the other
-//      is shorter. A middle part is kept, never split.
+//      is shorter. A middle part is kept, never split. The windows of a half-edge are listed by their
+//      start, and a new one is compared with those that start before it ends (trimming may leave the
+//      list slightly out of order: then a comparison is missed, which only prunes less).
 //   4. relay: a window within a hair of a vertex V (its whole interval closer to V than 1e-11 of its
 //      distance) is replaced by V, which lights its edges for this source as a pseudo-source does. Every
 //      path through the window reaches a point Y beyond it no shorter than d(V) + d(V, Y) - 2 hairs,
@@ -73,6 +75,7 @@ public:
     ~WindowStore() { std::free(data_); }
     void clear() { size_ = 0; }
     Window& operator[](int i) { return data_[i]; }
+    int size() const { return static_cast<int>(size_); }
     int push(const Window& w) {
         if (size_ == capacity_) {
             const size_t grown = std::max<size_t>(1024, 2 * capacity_);
@@ -389,22 +392,29 @@ private:
             relay(w.b1 <= HAIR * to0 ? F_[w.h] : F_[next(w.h)]);
             return;
         }
+        int before = -1;  // the last window kept here that starts no later than w
         for (int* link = &head_[w.h]; *link >= 0;) {
             Window& o = windows_[*link];
+            if (o.b0 >= w.b1) break;  // sorted by start: no later one overlaps w
             if (!contest(w, o)) return;
-            if (o.b1 < o.b0)
+            if (o.b1 < o.b0) {
                 *link = o.next;  // nothing left of it to compare with
-            else
-                link = &o.next;
+                continue;
+            }
+            if (o.b0 <= w.b0) before = *link;
+            link = &o.next;
         }
         const double t0 = at(w, w.b0), t1 = at(w, w.b1);
         if (useless(w, t0, t1)) return;
         improve(F_[w.h], t0 + w.b0);
         improve(F_[next(w.h)], t1 + len_[w.h] - w.b1);
         const double near = w.sx < w.b0 ? t0 : (w.sx > w.b1 ? t1 : w.sigma - w.sy);
-        w.next = head_[w.h];
-        head_[w.h] = windows_.push(w);
-        queue_.push(near, head_[w.h]);
+        int& link = before < 0 ? head_[w.h] : windows_[before].next;
+        w.next = link;
+        const int id = windows_.size();
+        link = id;
+        windows_.push(w);
+        queue_.push(near, id);
     }
 
     void propagate(const Window& w) {
