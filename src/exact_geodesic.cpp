@@ -169,11 +169,11 @@ inline double hit(double sx, double sy, double x, double px, double py, double q
 
 class Surface {
 public:
-    Surface(const double* V, int64_t n, const int32_t* F, int64_t m) : n_(n), m_(m), V_(V, V + 3 * n), F_(F, F + 3 * m) {
+    Surface(const double* V, int64_t n, const int32_t* F, int64_t m) : n_(n), m_(m), F_(F, F + 3 * m) {
         for (int64_t i = 0; i < 3 * m; ++i)
             if (F_[i] < 0 || F_[i] >= n) throw std::invalid_argument("face index out of range");
         build_twins();
-        build_frames();
+        build_frames(V);
         build_vertex_faces();
         d_.resize(n);
         emitted_.resize(n);
@@ -213,7 +213,6 @@ public:
 
 private:
     int64_t n_, m_;
-    std::vector<double> V_;
     std::vector<int32_t> F_;
     std::vector<int> twin_;             // per half-edge h = 3 f + k (F[h] -> F[next(h)]): its twin or -1
     std::vector<double> len_, cx_, cy_;  // per half-edge: length, opposite vertex in its frame (cy >= 0)
@@ -251,16 +250,16 @@ private:
         }
     }
 
-    void build_frames() {
+    void build_frames(const double* V) {  // the positions are needed only here
         len_.resize(3 * m_);
         cx_.resize(3 * m_);
         cy_.resize(3 * m_);
         std::vector<double> angle_sum(n_, 0.0);
         pseudo_.assign(n_, 0);
         for (int h = 0; h < 3 * m_; ++h) {
-            const double* a = &V_[3 * F_[h]];
-            const double* b = &V_[3 * F_[next(h)]];
-            const double* c = &V_[3 * F_[prev(h)]];
+            const double* a = &V[3 * F_[h]];
+            const double* b = &V[3 * F_[next(h)]];
+            const double* c = &V[3 * F_[prev(h)]];
             double u[3], w[3];
             for (int i = 0; i < 3; ++i) u[i] = b[i] - a[i], w[i] = c[i] - a[i];
             const double L = hypot2(hypot2(u[0], u[1]), u[2]);
@@ -299,7 +298,7 @@ private:
         }
     }
 
-    // A vertex's distance is final: a source or pseudo-source lights the edges opposite it.
+    // A vertex's distance is final: a source, pseudo-source or relay lights the edges opposite it.
     void settle(int v) {
         if (d_[v] >= emitted_[v]) return;
         emitted_[v] = d_[v];
@@ -381,16 +380,22 @@ private:
                to0 > (d_[F_[next(w.h)]] + len_[w.h] - w.b0) * (1.0 + MARGIN);
     }
 
+    // The edge's vertices take the paths through the window's ends (to0, to1: its distances there).
+    void reach_ends(const Window& w, double to0, double to1) {
+        improve(F_[w.h], to0 + w.b0);
+        improve(F_[next(w.h)], to1 + len_[w.h] - w.b1);
+    }
+
     // Vertex filter, relay (a window within a hair of a vertex) and trimming against the windows already
     // on the half-edge; then keep the window in its place by start and give the edge's vertices the
     // paths through its ends.
     void add_window(Window w) {
         const double to0 = at(w, w.b0), to1 = at(w, w.b1);
         if (useless(w, to0, to1)) return;
-        if (w.b1 <= HAIR * to0 || w.b0 >= len_[w.h] - HAIR * to1) {
-            improve(F_[w.h], to0 + w.b0);
-            improve(F_[next(w.h)], to1 + len_[w.h] - w.b1);
-            relay(w.b1 <= HAIR * to0 ? F_[w.h] : F_[next(w.h)]);
+        const bool at_start = w.b1 <= HAIR * to0;
+        if (at_start || w.b0 >= len_[w.h] - HAIR * to1) {
+            reach_ends(w, to0, to1);
+            relay(at_start ? F_[w.h] : F_[next(w.h)]);
             return;
         }
         int before = -1;  // the last window kept here that starts no later than w
@@ -407,8 +412,7 @@ private:
         }
         const double t0 = at(w, w.b0), t1 = at(w, w.b1);
         if (useless(w, t0, t1)) return;
-        improve(F_[w.h], t0 + w.b0);
-        improve(F_[next(w.h)], t1 + len_[w.h] - w.b1);
+        reach_ends(w, t0, t1);
         const double near = w.sx < w.b0 ? t0 : (w.sx > w.b1 ? t1 : w.sigma - w.sy);
         int& link = before < 0 ? head_[w.h] : windows_[before].next;
         w.next = link;
