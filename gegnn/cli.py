@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import csv
 import math
+import os
 from pathlib import Path
 
 import click
@@ -34,6 +35,18 @@ def main():
     """
 
 
+def _workers(ctx, param, value):
+    if value == "auto":
+        return None
+    try:
+        workers = int(value)
+    except ValueError:
+        workers = -1
+    if workers < 0:
+        raise click.BadParameter("a number of processes (0 or more), or auto")
+    return workers
+
+
 def _blocks(ctx, param, value):
     if value is None:
         return None
@@ -62,8 +75,20 @@ def _blocks(ctx, param, value):
 @click.option("--no-rotate", is_flag=True, help="Disable random-rotation augmentation.")
 @click.option("--seed", default=0, show_default=True)
 @click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True)
-@click.option("--workers", default=0, show_default=True, help="Loader processes building batches.")
-@click.option("--resume", is_flag=True, help="Continue RUN/last.safetensors exactly (its own options).")
+@click.option("--workers", callback=_workers, default="auto", show_default=True, metavar="N|auto",
+              help="Loader processes per process building batches (0: in the training process). auto: on a "
+                   "GPU one per spare CPU core, at most 8 (one GPU needs about 4: docs/benchmarks.md); on a "
+                   "CPU 0.")
+@click.option("--resume", is_flag=True,
+              help="Continue RUN/last.safetensors (its own options): bitwise-exact on a CPU, on a GPU with "
+                   "--deterministic.")
+@click.option("--deterministic", is_flag=True,
+              help="torch's deterministic algorithms: identical runs and resumes on a GPU too, where atomic "
+                   "scatter-adds otherwise sum in a varying order (slower; CPU runs are deterministic anyway).")
+@click.option("--landmark-cache", type=click.Path(file_okay=False),
+              help="Zarr cache of the landmark fields, filled before the first step and read by every loader "
+                   "worker and rank (default RUN/landmarks.zarr; keyed by mesh content, so runs may share "
+                   "one). ~2.5 MB per mesh and draw at K = 128, 5k vertices.")
 @click.option("--init", "init_ckpt", type=click.Path(exists=True, dir_okay=False), help="Start from these weights.")
 @click.option("--channels", default=256, show_default=True)
 @click.option("--blocks", callback=_blocks, help="ResBlocks per level, encoder = decoder [2,3,3,3,2].")
@@ -84,17 +109,21 @@ def _blocks(ctx, param, value):
 @click.option("--landmark-output", type=click.Choice(["ratio", "interval"]), default="ratio", show_default=True,
               help="d = L exp(MLP), or (ablation) d = L + (U - L) sigmoid(MLP); L, U: the landmark bounds.")
 def train(store, run_dir, epochs, batch_size, lr, weight_decay, warmup_epochs, clip_grad, distance,
-          pairs_per_mesh, val_fraction, val_store, no_rotate, seed, device, workers, resume, init_ckpt, channels,
-          blocks, aggr, no_edge_length, no_relative_position, plain_grid_pool, euclidean_decoder, landmarks,
-          landmark_no_embedding, landmark_no_euclidean, decoder_warmup, landmark_output):
+          pairs_per_mesh, val_fraction, val_store, no_rotate, seed, device, workers, resume, deterministic,
+          landmark_cache, init_ckpt, channels, blocks, aggr, no_edge_length, no_relative_position, plain_grid_pool,
+          euclidean_decoder, landmarks, landmark_no_embedding, landmark_no_euclidean, decoder_warmup,
+          landmark_output):
     """Train GeGnn on the geodata store STORE."""
     from .train import TrainConfig, train as run_training
 
+    if deterministic:  # cuBLAS is deterministic only with a fixed workspace, set before CUDA starts
+        os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
     cfg = TrainConfig(store=store, run=run_dir, epochs=epochs, batch_size=batch_size, lr=lr,
                       weight_decay=weight_decay, warmup_epochs=warmup_epochs, clip_grad=clip_grad,
                       distance=distance, pairs_per_mesh=pairs_per_mesh, val_fraction=val_fraction, val_store=val_store,
                       rotate=not no_rotate, seed=seed, device=device, workers=workers, resume=resume,
-                      init=init_ckpt, decoder_warmup=decoder_warmup)
+                      init=init_ckpt, decoder_warmup=decoder_warmup, landmark_cache=landmark_cache,
+                      deterministic=deterministic)
     extra = dict(encoder_blocks=blocks, decoder_blocks=blocks) if blocks else {}
     model_cfg = GeGnnConfig(channels=channels, embed_dim=channels, decoder_hidden=channels, aggr=aggr,
                             edge_length=not no_edge_length, relative_position=not no_relative_position,

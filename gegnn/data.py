@@ -6,13 +6,16 @@ loader worker makes it, so resumed, multi-worker and multi-process runs see iden
 from __future__ import annotations
 
 import hashlib
+from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 import torch
 from torch import Tensor
 
 from .graph import Graph, directed_edges, disjoint_union, random_rotation
+from .landmark_cache import LandmarkCache, geometry_key
 from .landmarks import landmark_fields
 from .nn.geopool import Hierarchy, build_hierarchy
 
@@ -21,7 +24,7 @@ __all__ = ["GeodesicStore", "MeshGeometry", "Batch", "split_meshes", "epoch_batc
 
 DISTANCES = ("geodesic", "biharmonic")
 VAL_EPOCH = -1  # rng stream of the fixed validation sample
-LANDMARK_DRAWS = 4  # landmark choices per training mesh (augmentation; each is computed once and kept)
+LANDMARK_DRAWS = 4  # landmark choices per training mesh (augmentation; each computed once, gegnn.landmark_cache)
 
 
 @dataclass
@@ -30,6 +33,7 @@ class MeshGeometry:
     normals: np.ndarray   # float32 (N, 3)
     edges: np.ndarray     # int64 (E, 2), undirected
     faces: np.ndarray     # int64 (F, 3)
+    key: str = ""         # content hash (gegnn.landmark_cache.geometry_key), set by BatchDataset
 
 
 class GeodesicStore:
@@ -118,10 +122,18 @@ class Batch:
     mesh_ids: tuple[str, ...]
     fields: Tensor | None = None
 
+    def apply(self, fn: Callable[[Tensor], Tensor]) -> "Batch":
+        """The batch with ``fn`` applied to every tensor."""
+        return Batch(self.hierarchy.apply(fn), fn(self.pairs), fn(self.distances), self.mesh_ids,
+                     None if self.fields is None else fn(self.fields))
+
     def to(self, device) -> "Batch":
-        return Batch(self.hierarchy.to(device), self.pairs.to(device, non_blocking=True),
-                     self.distances.to(device, non_blocking=True), self.mesh_ids,
-                     None if self.fields is None else self.fields.to(device, non_blocking=True))
+        return self.apply(partial(Tensor.to, device=device, non_blocking=True))
+
+    def pin_memory(self) -> "Batch":
+        """Page-locked copy, so that ``to(cuda)`` is an asynchronous copy (the DataLoader's ``pin_memory``
+        calls this in its pinning thread)."""
+        return self.apply(Tensor.pin_memory)
 
 
 def sample_mesh(geometry: MeshGeometry, pairs: np.ndarray, distances: np.ndarray,
@@ -164,16 +176,18 @@ class BatchDataset(torch.utils.data.Dataset):
         levels, sigma_c, sigma_n: the model's GeoPool settings.
         landmarks: K landmark fields per mesh (0: none). Training draws one of ``LANDMARK_DRAWS``
             landmark choices (seeds) per (epoch, mesh) as augmentation; validation uses seed 0, as
-            ``GeGnn.embed`` does. Fields are computed once per (mesh, seed) and kept (1.3 MB for K = 64
-            on 5k vertices).
+            ``GeGnn.embed`` does.
+        landmark_cache: a :class:`gegnn.landmark_cache.LandmarkCache` path the fields are read from
+            (training fills it first); fields missing there, or without a cache, are computed per use.
     """
 
     def __init__(self, store_path, distance, seed, num_pairs, rotate, levels, sigma_c, sigma_n,
-                 landmarks: int = 0):
+                 landmarks: int = 0, landmark_cache: str | None = None):
         self.store_path, self.distance, self.seed = str(store_path), distance, seed
         self.num_pairs, self.rotate, self.landmarks = num_pairs, rotate, landmarks
         self.levels, self.sigma_c, self.sigma_n = levels, sigma_c, sigma_n
-        self._store, self._geometries, self._fields = None, {}, {}
+        self.landmark_cache = landmark_cache
+        self._store, self._geometries, self._cache = None, {}, None
 
     @property
     def store(self) -> GeodesicStore:
@@ -191,24 +205,36 @@ class BatchDataset(torch.utils.data.Dataset):
         pairs, distances = self.store.pairs(mesh_id)
         fields = None
         if self.landmarks:
-            fields = self._landmark_fields(mesh_id, 0 if epoch == VAL_EPOCH else int(rng.integers(LANDMARK_DRAWS)))
-        return sample_mesh(self._geometry(mesh_id), pairs, distances, rng, self.num_pairs,
+            fields = self.landmark_fields(mesh_id, self.landmark_seed(epoch, rng))
+        return sample_mesh(self.geometry(mesh_id), pairs, distances, rng, self.num_pairs,
                            self.rotate and epoch != VAL_EPOCH, fields)
 
-    def _geometry(self, mesh_id: str) -> MeshGeometry:
-        # Geometry is small (~200 kB per 5k-vertex mesh) and kept; pairs (~7 MB) are read per use.
+    @staticmethod
+    def landmark_seed(epoch: int, rng: np.random.Generator) -> int:
+        """The landmark draw of a sample: seed 0 for validation, else one of ``LANDMARK_DRAWS``."""
+        return 0 if epoch == VAL_EPOCH else int(rng.integers(LANDMARK_DRAWS))
+
+    def geometry(self, mesh_id: str) -> MeshGeometry:
+        """The mesh's geometry with its content key (:func:`gegnn.landmark_cache.geometry_key`), kept:
+        ~200 kB per 5k-vertex mesh; pairs (~7 MB) are read per use."""
         if mesh_id not in self._geometries:
-            self._geometries[mesh_id] = self.store.geometry(mesh_id)
+            g = self.store.geometry(mesh_id)
+            g.key = geometry_key(g.vertices, g.faces)
+            self._geometries[mesh_id] = g
         return self._geometries[mesh_id]
 
-    def _landmark_fields(self, mesh_id: str, seed: int) -> np.ndarray:
-        if (mesh_id, seed) not in self._fields:
-            g = self._geometry(mesh_id)
-            self._fields[mesh_id, seed] = landmark_fields(g.vertices, g.faces, self.landmarks, seed).distances
-        return self._fields[mesh_id, seed]
+    def landmark_fields(self, mesh_id: str, seed: int) -> np.ndarray:
+        g = self.geometry(mesh_id)
+        if self.landmark_cache is not None:
+            if self._cache is None:
+                self._cache = LandmarkCache(self.landmark_cache, self.landmarks)
+            cached = self._cache.get(g.key, seed)
+            if cached is not None:
+                return cached
+        return landmark_fields(g.vertices, g.faces, self.landmarks, seed).distances
 
     def __getstate__(self):  # worker processes reopen the store themselves
-        return {**self.__dict__, "_store": None, "_geometries": {}, "_fields": {}}
+        return {**self.__dict__, "_store": None, "_geometries": {}, "_cache": None}
 
 
 class EpochSampler(torch.utils.data.Sampler):

@@ -6,18 +6,39 @@ own fast path between the two.
 """
 from __future__ import annotations
 
+import contextlib
+
 import torch
 from torch import Tensor, nn
 
-__all__ = ["DistanceDecoder", "LandmarkDecoder", "mlp"]
+__all__ = ["DistanceDecoder", "LandmarkDecoder", "MLP", "mlp"]
 
 MAX_LOG_RATIO = 5.0  # a ratio decoder never predicts more than e^5 = 148 times the lower bound
 
 
-def mlp(n_in: int, hidden: int) -> nn.Sequential:
+class MLP(nn.Sequential):
+    """Layers in sequence, the last one in fp32 whatever the autocast: it is a dot product, so fp32 costs
+    nothing, and a bf16 output would round every distance to 2^-8 relative (0.4%), a floor on the error
+    of a model near 1% (the same split as :meth:`gegnn.embedding.Embedding._decode`)."""
+
+    def forward(self, x: Tensor) -> Tensor:
+        *hidden, last = self
+        for layer in hidden:
+            x = layer(x)
+        with no_autocast(x.device):
+            return last(x.float())
+
+
+def no_autocast(device: torch.device):
+    """A region where autocast is off (a device type without autocast, e.g. meta, has none to leave)."""
+    if torch.amp.is_autocast_available(device.type):
+        return torch.autocast(device.type, enabled=False)
+    return contextlib.nullcontext()
+
+
+def mlp(n_in: int, hidden: int) -> MLP:
     """n_in -> hidden -> hidden -> 1 with ReLUs."""
-    return nn.Sequential(nn.Linear(n_in, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU(),
-                         nn.Linear(hidden, 1))
+    return MLP(nn.Linear(n_in, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, 1))
 
 
 class DistanceDecoder(nn.Module):

@@ -7,7 +7,8 @@ from torch import Tensor
 
 __all__ = ["Embedding"]
 
-CHUNK_VALUES = 1 << 19  # code values per side of one decoded chunk
+CHUNK_VALUES = 1 << 19  # code values per side of one decoded chunk on a CPU: intermediates stay in cache
+ACCELERATOR_CHUNK_VALUES = 1 << 26  # ... on a GPU: few launches (256 MB of fp32 codes per side)
 
 
 def _bf16_is_fast(device: torch.device) -> bool:
@@ -30,10 +31,11 @@ class Embedding:
         scale: factor from normalized units to the input's units.
         precision: ``"auto"`` (bf16 decoder where bf16 matmuls are fast, else fp32), ``"bf16"`` or
             ``"fp32"``. bf16 changes distances by ~0.3% relative (median), well below the model's error.
-        chunk: pairs decoded per batch; default about 512k code values per side (8192 pairs of 64-d
-            embeddings, 2674 of a landmark model's 196-d codes): fastest on CPU, large enough for the
-            matmul kernels, small enough that intermediates stay in cache (K = 128: 0.33 s per 1M
-            queries against 0.41 s with 8192).
+        chunk: pairs decoded per batch. On a CPU about 512k code values per side (8192 pairs of 64-d
+            embeddings, 2674 of a landmark model's 196-d codes): large enough for the matmul kernels,
+            small enough that intermediates stay in cache (K = 128: 0.33 s per 1M queries against
+            0.41 s with 8192). On a GPU 64M values per side (342k pairs of 196-d codes): 1M queries in
+            3 chunks, where the CPU's size would launch ~20k kernels.
         vertices, faces: the embedded mesh in its own units (:meth:`gegnn.GeGnn.embed` passes them):
             needed by the geometric queries, :meth:`path` and :meth:`log_map`.
     """
@@ -45,7 +47,8 @@ class Embedding:
         self.faces = None if faces is None else np.asarray(faces, dtype=np.int64)
         self._topology = None
         self.decoder, self.scale = decoder, float(scale)
-        self.chunk = chunk or max(1024, CHUNK_VALUES // self.features.shape[1])
+        values = CHUNK_VALUES if self.features.device.type == "cpu" else ACCELERATOR_CHUNK_VALUES
+        self.chunk = chunk or max(1024, values // self.features.shape[1])
         if precision == "auto":
             precision = "bf16" if _bf16_is_fast(self.features.device) else "fp32"
         self.dtype = {"bf16": torch.bfloat16, "fp32": torch.float32}[precision]
@@ -55,19 +58,36 @@ class Embedding:
     def num_vertices(self) -> int:
         return self.features.shape[0]
 
-    def distance(self, i, j) -> np.ndarray:
-        """Distances between vertices ``i`` and ``j`` (index arrays, broadcast against each other)."""
-        i, j = np.broadcast_arrays(np.asarray(i), np.asarray(j))
+    def distance(self, i, j):
+        """Distances between vertices ``i`` and ``j`` (index arrays, broadcast against each other).
+
+        NumPy arrays, lists or ints give a NumPy array; torch tensors (on any device) give a float32
+        tensor on the device of the codes, computed there without leaving it (one host sync, for the
+        index range check)."""
+        as_tensor = torch.is_tensor(i) or torch.is_tensor(j)
+        i, j = torch.broadcast_tensors(self._indices(i), self._indices(j))
         shape = i.shape
-        i, j = (torch.as_tensor(a.reshape(-1).astype(np.int64), device=self.features.device) for a in (i, j))
-        if len(i) and (min(i.min(), j.min()) < 0 or max(i.max(), j.max()) >= self.num_vertices):
-            raise IndexError("vertex index out of range")
+        i, j = i.reshape(-1), j.reshape(-1)
+        if len(i):
+            lo_i, hi_i = i.aminmax()
+            lo_j, hi_j = j.aminmax()
+            lo, hi = torch.stack([lo_i.minimum(lo_j), hi_i.maximum(hi_j)]).tolist()
+            if lo < 0 or hi >= self.num_vertices:
+                raise IndexError(f"vertex index out of range: {lo if lo < 0 else hi} "
+                                 f"(the mesh has {self.num_vertices} vertices)")
         out = torch.empty(len(i), dtype=torch.float32, device=self.features.device)
         with torch.inference_mode():
             for s in range(0, len(i), self.chunk):
                 out[s:s + self.chunk] = self._decode(i[s:s + self.chunk], j[s:s + self.chunk])
-            out[i == j] = 0  # the decoder of a zero difference is not exactly 0; a distance is
-        return (out.cpu().numpy() * self.scale).reshape(shape)
+            # The decoder of a zero difference is not exactly 0; a distance is. masked_fill, unlike
+            # out[i == j] = 0, needs no count of the mask, so no host sync.
+            out = out.masked_fill_(i == j, 0).mul_(self.scale).reshape(shape)
+        return out if as_tensor else out.cpu().numpy()
+
+    def _indices(self, x) -> Tensor:
+        if torch.is_tensor(x):
+            return x.to(self.features.device, torch.long, non_blocking=True)
+        return torch.as_tensor(np.asarray(x).astype(np.int64), device=self.features.device)
 
     def field(self, source: int) -> np.ndarray:
         """Distances from vertex ``source`` to every vertex, (N,)."""

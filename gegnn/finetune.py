@@ -97,9 +97,9 @@ def finetune(model, vertices, faces, sources: int = 64, held_out: int = 8, steps
         p = train_pairs[pick]
         return relative_error(model.distance(z[p[:, 0]], z[p[:, 1]]), train_d[pick]).mean()
 
-    generator = torch.Generator().manual_seed(seed)
+    generator = torch.Generator(device).manual_seed(seed)
     fit = partial(fit_pairs, n_pairs=len(train_pairs), pairs_per_step=pairs_per_step, generator=generator,
-                  device=device, progress=progress)
+                  progress=progress)
     losses = []
     if decoder_steps:
         losses += fit(list(model.distance.parameters()), lambda pick: pair_loss(codes, pick),

@@ -4,7 +4,9 @@ Everything here is layout only (no learning): the layers in :mod:`gegnn.nn` cons
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, fields
+from functools import partial
 
 import numpy as np
 import torch
@@ -34,9 +36,15 @@ class Graph:
     def num_nodes(self) -> int:
         return self.pos.shape[0]
 
+    def apply(self, fn: Callable[[Tensor], Tensor]) -> "Graph":
+        """The graph with ``fn`` applied to every tensor."""
+        return Graph(*(fn(getattr(self, f.name)) for f in fields(self)))
+
     def to(self, device) -> "Graph":
-        return Graph(*(t.to(device, non_blocking=True) for t in
-                       (self.pos, self.normal, self.edge_index, self.batch)))
+        return self.apply(partial(Tensor.to, device=device, non_blocking=True))
+
+    def pin_memory(self) -> "Graph":
+        return self.apply(Tensor.pin_memory)
 
 
 def directed_edges(edges: Tensor) -> Tensor:

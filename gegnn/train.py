@@ -19,15 +19,19 @@ import torch.distributed as dist
 from tqdm import tqdm
 
 from .checkpoint import load_checkpoint, save_checkpoint
-from .data import VAL_EPOCH, BatchDataset, EpochSampler, GeodesicStore, split_meshes
+from .data import LANDMARK_DRAWS, VAL_EPOCH, BatchDataset, EpochSampler, GeodesicStore, split_meshes
+from .landmark_cache import LandmarkCache, geometry_key
 from .model import GeGnn, GeGnnConfig
 
 __all__ = ["TrainConfig", "train", "relative_error", "evaluate_store", "lr_at"]
 
 METRICS = ["epoch", "step", "lr", "train_mre", "val_mre", "seconds"]
 METRIC_EPS = 1e-3  # offset of the relative error's denominator, in normalized units
-RESUME_KEEPS = ("epochs", "device", "workers")  # options a resumed run takes from the command line
+RESUME_KEEPS = ("epochs", "device", "workers", "landmark_cache")  # options a resumed run takes from the command line
 WARMUP_LR = 1e-3  # decoder warm-up: a small MLP on fixed codes (the network's --lr is usually lower)
+WARMUP_BYTES = 2 << 30  # decoder warm-up: codes and pairs kept on the device, per rank
+MAX_AUTO_WORKERS = 8  # --workers auto on a GPU: one per spare CPU core, at most this many (docs/benchmarks.md)
+PROGRESS_EVERY = 25  # steps between progress-bar updates (each reads a loss from the device)
 
 
 @dataclass(frozen=True)
@@ -47,10 +51,12 @@ class TrainConfig:
     rotate: bool = True
     seed: int = 0
     device: str = "auto"
-    workers: int = 0                 # loader processes (0: build batches in the training process)
+    workers: int | None = None       # loader processes per rank (0: in the training process; None: auto)
     resume: bool = False
     init: str | None = None
     decoder_warmup: int = 0          # decoder-only steps on frozen network codes before the first epoch
+    landmark_cache: str | None = None  # landmark fields' zarr cache (None: RUN/landmarks.zarr)
+    deterministic: bool = False      # torch's deterministic algorithms: bitwise-exact resume on CUDA too
 
 
 def relative_error(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
@@ -95,6 +101,22 @@ def pick_device(name: str) -> torch.device:
     return device
 
 
+def cpus_per_process() -> int:
+    """CPU cores this process may use, shared with the other processes of its node (torchrun's
+    LOCAL_WORLD_SIZE)."""
+    cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    return max(1, cpus // int(os.environ.get("LOCAL_WORLD_SIZE", "1")))
+
+
+def auto_workers(device: torch.device) -> int:
+    """Loader processes for ``--workers auto``: on a GPU one per spare core of this rank (at most
+    ``MAX_AUTO_WORKERS``), since a batch takes longer to build on one core than a step takes on the GPU;
+    on a CPU none, since the cores are the network's."""
+    if device.type == "cpu":
+        return 0
+    return min(MAX_AUTO_WORKERS, max(1, cpus_per_process() - 1))
+
+
 def all_sum(values: list[float], ctx: Dist, device) -> list[float]:
     if ctx.world == 1:
         return values
@@ -104,10 +126,16 @@ def all_sum(values: list[float], ctx: Dist, device) -> list[float]:
 
 
 # -- one step, one epoch ---------------------------------------------------------------------------
-def train_step(model, batch, optimizer, lr: float, clip_grad: float, device) -> float:
+def autocast(device: torch.device):
+    """bf16 autocast on a GPU (the network; decoders keep their output layer in fp32), none on a CPU."""
+    return torch.autocast("cuda", dtype=torch.bfloat16, enabled=device.type == "cuda")
+
+
+def train_step(model, batch, optimizer, lr: float, clip_grad: float, device) -> torch.Tensor:
+    """One optimizer step; returns the loss as a device tensor (reading it would wait for the device)."""
     for group in optimizer.param_groups:
         group["lr"] = lr
-    with torch.autocast("cuda", dtype=torch.bfloat16, enabled=device.type == "cuda"):
+    with autocast(device):
         pred = model(batch.hierarchy, batch.pairs, batch.fields)
     loss = relative_error(pred, batch.distances).mean()
     optimizer.zero_grad(set_to_none=True)
@@ -115,7 +143,7 @@ def train_step(model, batch, optimizer, lr: float, clip_grad: float, device) -> 
     if clip_grad > 0:
         torch.nn.utils.clip_grad_norm_(model.parameters(), clip_grad)
     optimizer.step()
-    return loss.item()
+    return loss.detach()
 
 
 def train_epoch(model, loader, optimizer, cfg: TrainConfig, step: int, total: int, warmup: int,
@@ -124,50 +152,74 @@ def train_epoch(model, loader, optimizer, cfg: TrainConfig, step: int, total: in
     losses = []
     bar = tqdm(loader, desc="train", leave=False, disable=not ctx.main, dynamic_ncols=True)
     for batch in bar:
-        loss = train_step(model, batch.to(device), optimizer, lr_at(step, total, cfg.lr, warmup),
-                          cfg.clip_grad, device)
-        losses.append(loss)
+        losses.append(train_step(model, batch.to(device), optimizer, lr_at(step, total, cfg.lr, warmup),
+                                 cfg.clip_grad, device))
         step += 1
-        bar.set_postfix(mre=f"{loss:.4f}")
-    total_loss, count = all_sum([sum(losses), len(losses)], ctx, device)
+        if len(losses) % PROGRESS_EVERY == 1:
+            show_loss(bar, losses)
+    total_loss = torch.stack(losses).double().sum().item() if losses else 0.0
+    total_loss, count = all_sum([total_loss, len(losses)], ctx, device)
     return total_loss / max(count, 1), step
 
 
+def show_loss(bar, losses: list[torch.Tensor]) -> None:
+    """Show the loss of the step before the last: the device is busy with the last one meanwhile, so
+    reading it does not drain the queue of launched kernels."""
+    if bar.disable:
+        return
+    bar.set_postfix(mre=f"{losses[-2 if len(losses) > 1 else -1].item():.4f}")
+
+
 @torch.no_grad()
-def validate(model, dataset: BatchDataset, mesh_ids, device, ctx: Dist) -> float:
-    """MRE over a fixed sample of pairs (same every epoch, no rotation) of this rank's share."""
+def validate(model, loader, device, ctx: Dist) -> float:
+    """MRE over a fixed sample of pairs (same every epoch, no rotation) of this rank's share, in fp32 (as
+    ``gegnn eval``: the choice of ``best.safetensors`` must not depend on bf16 rounding)."""
     model.eval()
-    err, count = 0.0, 0
-    for mesh_id in mesh_ids[ctx.rank::ctx.world]:
-        batch = dataset[(VAL_EPOCH, (mesh_id,))].to(device)
-        with torch.autocast("cuda", dtype=torch.bfloat16, enabled=device.type == "cuda"):
-            pred = model(batch.hierarchy, batch.pairs, batch.fields)
-        e = relative_error(pred, batch.distances)
-        err, count = err + e.sum().item(), count + e.numel()
-    err, count = all_sum([err, count], ctx, device)
+    err, count = torch.zeros((), dtype=torch.float64, device=device), 0
+    for batch in loader:
+        batch = batch.to(device)
+        e = relative_error(model(batch.hierarchy, batch.pairs, batch.fields), batch.distances)
+        err += e.sum()
+        count += e.numel()
+    err, count = all_sum([err.item(), count], ctx, device)
     return err / count if count else float("nan")
 
 
 def fit_pairs(params, loss_fn, n_pairs: int, steps: int, lr: float, pairs_per_step: int,
-              generator: torch.Generator, device, desc: str, progress: bool = True) -> list[float]:
+              generator: torch.Generator, desc: str, progress: bool = True, ctx: Dist | None = None) -> list[float]:
     """``steps`` AdamW steps (no weight decay) on ``params``, each on the loss ``loss_fn(indices)`` of
-    ``pairs_per_step`` random indices into ``n_pairs`` pairs, the learning rate decaying linearly from
-    ``lr`` to 0. Returns the losses. The loop of the decoder warm-up and of finetuning."""
+    ``pairs_per_step`` random indices into ``n_pairs`` pairs, drawn on the ``generator``'s device, the
+    learning rate decaying linearly from ``lr`` to 0. With ``ctx`` of several processes the gradients are
+    averaged across them (each process its own pairs). Returns the losses. The loop of the decoder
+    warm-up and of finetuning."""
+    params = list(params)
     optimizer = torch.optim.AdamW(params, lr=lr, weight_decay=0.0)
     losses = []
     bar = tqdm(range(steps), desc=desc, leave=False, disable=not progress, dynamic_ncols=True)
     for step in bar:
         for group in optimizer.param_groups:
             group["lr"] = lr * (1 - step / steps)
-        pick = torch.randint(n_pairs, (pairs_per_step,), generator=generator).to(device)
+        pick = torch.randint(n_pairs, (pairs_per_step,), generator=generator, device=generator.device)
         loss = loss_fn(pick)
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
+        if ctx is not None and ctx.world > 1:
+            average_gradients(params, ctx)
         optimizer.step()
-        losses.append(loss.item())
-        if step % 100 == 0:
-            bar.set_postfix(mre=f"{losses[-1]:.4f}")
-    return losses
+        losses.append(loss.detach())
+        if step % 100 == 1:
+            show_loss(bar, losses)
+    return torch.stack(losses).tolist() if losses else []
+
+
+def average_gradients(params: list[torch.Tensor], ctx: Dist) -> None:
+    """Mean of the gradients over the processes: one all-reduce of all of them, flattened."""
+    grads = [p.grad for p in params if p.grad is not None]
+    flat = torch.cat([g.reshape(-1) for g in grads])
+    dist.all_reduce(flat)
+    flat /= ctx.world
+    for g, part in zip(grads, flat.split([g.numel() for g in grads])):
+        g.copy_(part.view_as(g))
 
 
 def pair_errors(distance, codes: torch.Tensor, pairs: torch.Tensor, targets: torch.Tensor,
@@ -178,24 +230,33 @@ def pair_errors(distance, codes: torch.Tensor, pairs: torch.Tensor, targets: tor
                       for p, d in zip(pairs.split(chunk), targets.split(chunk))])
 
 
-def warm_decoder(model, dataset: BatchDataset, mesh_ids, steps: int, lr: float, device, log,
-                 pairs_per_step: int = 16384) -> None:
-    """Train the decoder alone on the frozen network's codes of every training mesh.
+def warm_decoder(model, loader, steps: int, lr: float, device, log, ctx: Dist | None = None,
+                 pairs_per_step: int = 16384, budget: int = WARMUP_BYTES) -> None:
+    """Train the decoder alone on the frozen network's codes of the meshes of ``loader`` (validation-style
+    batches of one mesh: no rotation, landmark seed 0).
 
     A fresh decoder needs thousands of optimizer steps, the network a few hundred: one network step
     costs ~3 s on a 2-core CPU, one decoder step on precomputed codes ~10 ms. The codes (one forward
-    pass per mesh, no rotation, landmark seed 0) and a fixed sample of pairs are kept in memory (~4 MB
-    per 5k-vertex mesh at K = 128). Decays linearly to 0 over ``steps``."""
+    pass per mesh) and a fixed sample of pairs are kept on the device (~4 MB per 5k-vertex mesh at
+    K = 128 and 20k pairs, ~10 MB at 100k pairs), up to ``budget`` bytes per process: the meshes beyond it
+    are left out. Under DDP every rank does this with its own meshes and pairs, and the gradients are
+    averaged, so all ranks leave with the same decoder. Decays linearly to 0 over ``steps``."""
+    ctx = ctx or Dist()
     model.eval()
-    codes, pairs, dists, offset = [], [], [], 0
+    codes, pairs, dists, offset, used = [], [], [], 0, 0
     with torch.no_grad():
-        for mesh_id in tqdm(mesh_ids, desc="decoder warm-up: codes", leave=False, dynamic_ncols=True):
-            batch = dataset[(VAL_EPOCH, (mesh_id,))].to(device)
+        for batch in tqdm(loader, desc="decoder warm-up: codes", leave=False, disable=not ctx.main,
+                          dynamic_ncols=True):
+            batch = batch.to(device)
             z = model(batch.hierarchy, fields=batch.fields)
             codes.append(z)
             pairs.append(batch.pairs + offset)
             dists.append(batch.distances)
             offset += len(z)
+            used += sum(t.numel() * t.element_size() for t in (z, batch.pairs, batch.distances))
+            if used >= budget:
+                break
+    n_meshes = len(codes)
     codes, pairs, dists = torch.cat(codes), torch.cat(pairs), torch.cat(dists)
     model.train()
 
@@ -203,11 +264,12 @@ def warm_decoder(model, dataset: BatchDataset, mesh_ids, steps: int, lr: float, 
         p = pairs[pick]
         return relative_error(model.distance(codes[p[:, 0]], codes[p[:, 1]]), dists[pick]).mean()
 
-    losses = fit_pairs(list(model.distance.parameters()), loss, len(pairs), steps, lr, pairs_per_step,
-                       torch.Generator().manual_seed(0), device, "decoder warm-up")
+    generator = torch.Generator(device).manual_seed(ctx.rank)
+    losses = fit_pairs(model.distance.parameters(), loss, len(pairs), steps, lr, pairs_per_step, generator,
+                       "decoder warm-up", progress=ctx.main, ctx=ctx)
     model.zero_grad(set_to_none=True)
-    log.info(f"decoder warm-up: {steps} steps on {len(mesh_ids)} meshes' codes, MRE {losses[0]:.4f} -> "
-             f"{sum(losses[-50:]) / len(losses[-50:]):.4f}")
+    log.info(f"decoder warm-up: {steps} steps on {n_meshes} meshes' codes per process "
+             f"({used / 2 ** 20:.0f} MiB), MRE {losses[0]:.4f} -> {sum(losses[-50:]) / len(losses[-50:]):.4f}")
 
 
 # -- run directory ---------------------------------------------------------------------------------
@@ -265,18 +327,23 @@ def plot_curves(run: Path, rows: list[dict]) -> None:
 
 
 def rng_state() -> dict:
+    """The CPU generator's state and, where this process has used CUDA, its own device's (each rank
+    drives one GPU; a resume may see another number of them)."""
     state = {"torch": torch.get_rng_state()}
-    if torch.cuda.is_available():
-        state.update({f"cuda{k}": s for k, s in enumerate(torch.cuda.get_rng_state_all())})
+    if torch.cuda.is_available() and torch.cuda.is_initialized():
+        state["cuda"] = torch.cuda.get_rng_state()
     return state
 
 
 def restore_rng(state: dict) -> None:
+    """Undo :func:`rng_state` on this process's current CUDA device. Checkpoints written before kept
+    every device's state as ``cuda0``, ``cuda1``, ...: the current device's is taken, if saved."""
     if "torch" in state:
         torch.set_rng_state(state["torch"])
-    cuda = [state[k] for k in sorted(k for k in state if k.startswith("cuda"))]
-    if cuda and torch.cuda.is_available():
-        torch.cuda.set_rng_state_all(cuda)
+    if torch.cuda.is_available():
+        cuda = state.get("cuda", state.get(f"cuda{torch.cuda.current_device()}"))
+        if cuda is not None:
+            torch.cuda.set_rng_state(cuda)
 
 
 # -- the run -------------------------------------------------------------------------------------
@@ -296,6 +363,8 @@ def train(cfg: TrainConfig, model_config: GeGnnConfig | None = None) -> list[dic
         dist.barrier()
     log = run_logger(run, ctx.main)
 
+    if cfg.deterministic:
+        torch.use_deterministic_algorithms(True)
     torch.manual_seed(cfg.seed)
     model, optimizer, start_epoch, step, best = build_model(cfg, model_config, resume, device, log)
     store = GeodesicStore(cfg.store, cfg.distance)
@@ -305,21 +374,29 @@ def train(cfg: TrainConfig, model_config: GeGnnConfig | None = None) -> list[dic
         train_ids, val_ids = split_meshes(store.mesh_ids, cfg.val_fraction)
     if not train_ids:
         raise ValueError(f"{cfg.store}: no committed meshes with {cfg.distance} distances")
+    cache = (cfg.landmark_cache or str(run / "landmarks.zarr")) if model.config.landmarks else None
     dataset, val_dataset = (BatchDataset(path, cfg.distance, cfg.seed, cfg.pairs_per_mesh, cfg.rotate,
                                          model.config.levels, model.config.sigma_c, model.config.sigma_n,
-                                         model.config.landmarks)
+                                         model.config.landmarks, cache)
                             for path in (cfg.store, cfg.val_store or cfg.store))
-    if cfg.decoder_warmup and start_epoch == 0 and ctx.main:
-        warm_decoder(model, dataset, train_ids, cfg.decoder_warmup, WARMUP_LR, device, log)
-        log.info(f"after the decoder warm-up: val_mre {validate(model, val_dataset, val_ids, device, Dist()):.4f}")
-    # DDP broadcasts rank 0's weights (its warmed decoder included) to every rank here.
+    if cache:
+        fill_landmark_cache(cache, model.config.landmarks,
+                            [(dataset, train_ids, range(LANDMARK_DRAWS)), (val_dataset, val_ids, [0])], ctx, device,
+                            log)
+    workers = auto_workers(device) if cfg.workers is None else cfg.workers
+    val_loader = make_loader(val_dataset, single_mesh_keys(val_ids, ctx), workers, device)
+    if cfg.decoder_warmup and start_epoch == 0:
+        warm_decoder(model, make_loader(dataset, single_mesh_keys(train_ids, ctx), workers, device, persistent=False),
+                     cfg.decoder_warmup, WARMUP_LR, device, log, ctx)
+        log.info(f"after the decoder warm-up: val_mre {validate(model, val_loader, device, ctx):.4f}")
     net = torch.nn.parallel.DistributedDataParallel(model) if ctx.world > 1 else model
     sampler = EpochSampler(train_ids, cfg.seed, cfg.batch_size, ctx.rank, ctx.world)
-    loader = make_loader(dataset, sampler, cfg.workers, device)
+    loader = make_loader(dataset, sampler, workers, device)
     steps_per_epoch = len(sampler)
     total, warmup = cfg.epochs * steps_per_epoch, round(cfg.warmup_epochs * steps_per_epoch)
     log.info(f"{len(train_ids)} train / {len(val_ids)} val meshes, {ctx.world} process(es) on {device}, "
-             f"{steps_per_epoch} steps per epoch, {sum(p.numel() for p in model.parameters()):,} parameters")
+             f"{workers} loader worker(s) each, {steps_per_epoch} steps per epoch, "
+             f"{sum(p.numel() for p in model.parameters()):,} parameters")
 
     rows = read_metrics(run, start_epoch) if ctx.main else []
     last_plot = -math.inf
@@ -327,7 +404,7 @@ def train(cfg: TrainConfig, model_config: GeGnnConfig | None = None) -> list[dic
         t0 = time.perf_counter()
         sampler.set_epoch(epoch)
         train_mre, step = train_epoch(net, loader, optimizer, cfg, step, total, warmup, device, ctx)
-        val_mre = validate(model, val_dataset, val_ids, device, ctx)
+        val_mre = validate(model, val_loader, device, ctx)
         row = dict(epoch=str(epoch), step=str(step), lr=f"{lr_at(step - 1, total, cfg.lr, warmup):.3e}",
                    train_mre=f"{train_mre:.6f}", val_mre=f"{val_mre:.6f}",
                    seconds=f"{time.perf_counter() - t0:.2f}")
@@ -399,11 +476,41 @@ def save_run(run: Path, model, optimizer, cfg, epoch, step, best, rows, improved
     save_checkpoint(run / "last.safetensors", model, optimizer, rng_state(), metadata=meta)
 
 
-def make_loader(dataset, sampler, workers: int, device):
+def make_loader(dataset, sampler, workers: int, device, persistent: bool = True):
+    """Batches of ``dataset`` for the keys of ``sampler``, built by ``workers`` processes that keep two
+    batches each ready; on a GPU pinned, so ``batch.to(device)`` copies asynchronously."""
     # Workers are spawned, not forked: zarr v3 runs an asyncio thread that a fork would copy mid-state.
-    extra = dict(multiprocessing_context="spawn", persistent_workers=True, prefetch_factor=2) if workers else {}
+    extra = dict(multiprocessing_context="spawn", persistent_workers=persistent, prefetch_factor=2) \
+        if workers else {}
     return torch.utils.data.DataLoader(dataset, sampler=sampler, batch_size=None, collate_fn=_identity,
                                        num_workers=workers, pin_memory=device.type == "cuda", **extra)
+
+
+def single_mesh_keys(mesh_ids: list[str], ctx: Dist) -> list[tuple]:
+    """This rank's share of ``mesh_ids`` as validation-style keys: one mesh per batch, fixed pairs."""
+    return [(VAL_EPOCH, (m,)) for m in mesh_ids[ctx.rank::ctx.world]]
+
+
+def fill_landmark_cache(path: str, k: int, work: list[tuple], ctx: Dist, device, log) -> None:
+    """Compute the landmark fields that ``path`` lacks, for ``work``: (dataset, mesh ids, seeds) triples.
+    Every rank takes its share of the meshes and the CPU cores of its share of the node; the fields
+    then serve every loader worker and rank (:mod:`gegnn.landmark_cache`)."""
+    cache = LandmarkCache(path, k)
+    if ctx.main:
+        cache.create()  # once, before the ranks write into it
+    if ctx.world > 1:
+        dist.barrier()
+    todo = []
+    for dataset, mesh_ids, seeds in work:
+        for mesh_id in mesh_ids[ctx.rank::ctx.world]:
+            g = dataset.store.geometry(mesh_id)
+            todo += cache.missing([(geometry_key(g.vertices, g.faces), g.vertices, g.faces)], seeds)
+    t0 = time.perf_counter()
+    cache.fill(todo, jobs=cpus_per_process(), progress=ctx.main)
+    total = all_sum([len(todo)], ctx, device)[0]
+    if ctx.world > 1:
+        dist.barrier()
+    log.info(f"landmark fields: {int(total)} computed in {time.perf_counter() - t0:.1f} s, cached in {path}")
 
 
 def _identity(batch):

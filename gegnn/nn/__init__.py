@@ -1,7 +1,8 @@
 """Graph layers of GeGnn (pure torch)."""
 from .blocks import ResBlock, ResBlocks
-from .geoconv import GeoConv, aggregate
+from .geoconv import GeoConv
 from .geopool import GeoPool, GeoUnpool, Hierarchy, build_hierarchy, geo_clusters, pool_features, pool_graph
+from .scatter import ScatterMax, aggregate, scatter_count, scatter_mean
 
-__all__ = ["GeoConv", "aggregate", "GeoPool", "GeoUnpool", "Hierarchy", "build_hierarchy", "geo_clusters",
-           "pool_features", "pool_graph", "ResBlock", "ResBlocks"]
+__all__ = ["GeoConv", "aggregate", "scatter_count", "scatter_mean", "ScatterMax", "GeoPool", "GeoUnpool",
+           "Hierarchy", "build_hierarchy", "geo_clusters", "pool_features", "pool_graph", "ResBlock", "ResBlocks"]

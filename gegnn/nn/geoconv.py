@@ -5,46 +5,9 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-__all__ = ["GeoConv", "aggregate"]
+from .scatter import AGGREGATIONS, aggregate
 
-AGGREGATIONS = ("max", "mean", "sum")
-
-
-def aggregate(msg: Tensor, index: Tensor, num_nodes: int, aggr: str = "max") -> Tensor:
-    """Reduce edge messages (E, C) onto their receiving vertices (index (E,)) -> (num_nodes, C).
-
-    Vertices without incoming edges get zeros.
-    """
-    if aggr == "max":
-        return ScatterMax.apply(msg, index, num_nodes)
-    out = msg.new_zeros(num_nodes, msg.shape[1]).index_add_(0, index, msg)
-    if aggr == "sum":
-        return out
-    count = torch.bincount(index, minlength=num_nodes).clamp_min(1).to(msg.dtype)
-    return out / count.unsqueeze(1)
-
-
-class ScatterMax(torch.autograd.Function):
-    """Max over incoming edges with a lean backward.
-
-    Forward is torch's own ``scatter_reduce(..., "amax", include_self=False)``. Its built-in backward was
-    measured here at ~40x the forward on CPU (and had NaN gradients in some versions, pytorch#169263), so
-    the gradient is written out: it flows to the message(s) equal to the maximum (all of them on exact ties,
-    which are measure-zero for real-valued messages).
-    """
-
-    @staticmethod
-    def forward(ctx, msg: Tensor, index: Tensor, num_nodes: int) -> Tensor:
-        idx = index.unsqueeze(1).expand_as(msg)
-        out = msg.new_zeros(num_nodes, msg.shape[1]).scatter_reduce_(0, idx, msg, "amax", include_self=False)
-        ctx.save_for_backward(msg, index, out)
-        return out
-
-    @staticmethod
-    def backward(ctx, grad_out: Tensor):
-        msg, index, out = ctx.saved_tensors
-        grad = torch.where(msg == out[index], grad_out[index], 0)
-        return grad, None, None
+__all__ = ["GeoConv"]
 
 
 class GeoConv(nn.Module):

@@ -2,12 +2,15 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 
 import torch
 from torch import Tensor, nn
 
 from ..graph import Graph
+from .scatter import scatter_mean
 
 __all__ = ["geo_clusters", "pool_graph", "pool_features", "unpool_features", "Hierarchy",
            "build_hierarchy", "GeoPool", "GeoUnpool"]
@@ -39,9 +42,7 @@ def geo_clusters(pos: Tensor, normal: Tensor, batch: Tensor, sigma_c: float,
 
 def pool_features(x: Tensor, cluster: Tensor, num_clusters: int) -> Tensor:
     """Mean of ``x`` (N, C) per cluster -> (num_clusters, C)."""
-    total = x.new_zeros(num_clusters, x.shape[1]).index_add_(0, cluster, x)
-    count = torch.bincount(cluster, minlength=num_clusters).clamp_min(1).to(x.dtype)
-    return total / count.unsqueeze(1)
+    return scatter_mean(x, cluster, num_clusters)
 
 
 def unpool_features(x: Tensor, cluster: Tensor) -> Tensor:
@@ -75,9 +76,17 @@ class Hierarchy:
     def depth(self) -> int:
         return len(self.clusters)
 
+    def apply(self, fn: Callable[[Tensor], Tensor]) -> "Hierarchy":
+        """The hierarchy with ``fn`` applied to every tensor."""
+        return Hierarchy([g.apply(fn) for g in self.graphs], [fn(c) for c in self.clusters])
+
     def to(self, device) -> "Hierarchy":
-        return Hierarchy([g.to(device) for g in self.graphs],
-                         [c.to(device, non_blocking=True) for c in self.clusters])
+        return self.apply(partial(Tensor.to, device=device, non_blocking=True))
+
+    def pin_memory(self) -> "Hierarchy":
+        """Page-locked copy, so that ``to(cuda)`` is an asynchronous copy (the DataLoader's ``pin_memory``
+        calls this in its pinning thread)."""
+        return self.apply(Tensor.pin_memory)
 
 
 def build_hierarchy(graph: Graph, levels: int, sigma_c: float = 1 / 16,

@@ -185,7 +185,8 @@ def test_decoder_warmup_trains_the_decoder_alone(tiny_store):
                             for b in (dataset[(-1, (m,))] for m in ids)])
 
     before, network = error(), {k: v.clone() for k, v in model.state_dict().items() if not k.startswith("distance.")}
-    gtrain.warm_decoder(model, dataset, ids, 200, 3e-3, torch.device("cpu"), logging.getLogger("test"))
+    keys = gtrain.single_mesh_keys(ids, gtrain.Dist())
+    gtrain.warm_decoder(model, (dataset[k] for k in keys), 200, 3e-3, torch.device("cpu"), logging.getLogger("test"))
     assert error() < 0.7 * before
     for name, value in network.items():
         torch.testing.assert_close(model.state_dict()[name], value)
