@@ -18,7 +18,9 @@ stores (``gegnn train --landmark-cache DIR``), and a killed fill loses only the 
 from __future__ import annotations
 
 import hashlib
+import multiprocessing
 from collections.abc import Iterable
+from concurrent.futures import ProcessPoolExecutor, as_completed
 
 import numpy as np
 
@@ -86,16 +88,25 @@ class LandmarkCache:
 
     def fill(self, todo: list, jobs: int = 1, progress: bool = True) -> None:
         """Compute and store the fields of every ``(key, vertices, faces, seed)`` in ``todo`` with ``jobs``
-        local processes (joblib's loky), writing each as it arrives."""
-        from joblib import Parallel, delayed
+        local processes, writing each as it arrives.
+
+        The processes are spawned for this call and end with it: joblib's loky workers would idle on for
+        5 minutes, and a torchrun or ``mp.spawn`` child cannot exit while they do."""
         from tqdm import tqdm
 
-        work = Parallel(n_jobs=jobs, return_as="generator_unordered")(
-            delayed(_fields)(key, v, f, self.k, seed) for key, v, f, seed in todo)
-        for key, seed, fields in tqdm(work, total=len(todo), desc="landmark fields", leave=False,
-                                      disable=not progress, dynamic_ncols=True):
-            self.put(key, seed, fields)
+        bar = tqdm(total=len(todo), desc="landmark fields", leave=False, disable=not progress, dynamic_ncols=True)
+        jobs = min(jobs, len(todo))
+        if jobs <= 1:
+            for item in todo:
+                self.put(*_fields(*item, self.k))
+                bar.update()
+        else:
+            with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+                for future in as_completed([pool.submit(_fields, *item, self.k) for item in todo]):
+                    self.put(*future.result())
+                    bar.update()
+        bar.close()
 
 
-def _fields(key: str, vertices: np.ndarray, faces: np.ndarray, k: int, seed: int, t_coef: float = T_COEF):
+def _fields(key: str, vertices: np.ndarray, faces: np.ndarray, seed: int, k: int, t_coef: float = T_COEF):
     return key, seed, landmark_fields(vertices, faces, k, seed, t_coef).distances

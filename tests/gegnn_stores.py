@@ -90,7 +90,7 @@ def overfit(store, steps, channels=64, landmarks=0):
     model = GeGnn(small_config(channels, landmarks=landmarks))
     batch = BatchDataset(store, "geodesic", 0, None, False, 5, 1 / 16, 3 / 16, landmarks)[(0, ("ellipsoid",))]
     opt = torch.optim.AdamW(model.parameters(), lr=3e-3, weight_decay=0.01)
-    first = train_step(model, batch, opt, 3e-3, 0.0, torch.device("cpu"))
+    first = train_step(model, batch, opt, 3e-3, 0.0, torch.device("cpu")).item()
     for s in range(1, steps):
         train_step(model, batch, opt, lr_at(s, steps, 3e-3, 0), 0.0, torch.device("cpu"))
     with torch.no_grad():

@@ -1,4 +1,5 @@
 import csv
+import logging
 import socket
 from pathlib import Path
 
@@ -98,6 +99,19 @@ def _ddp_worker(rank, port, store, out):
             torch.save({k: p.grad for k, p in model.named_parameters()}, Path(out) / "ddp_grads.pt")
         train(TrainConfig(store=store, run=str(Path(out) / "run"), epochs=1, batch_size=1,
                           pairs_per_mesh=200), small_config())
+        # The decoder warm-up runs on every rank, each on its own meshes and pairs, gradients averaged.
+        torch.manual_seed(0)
+        model = GeGnn(small_config(landmarks=4))
+        initial = {k: v.clone() for k, v in model.distance.state_dict().items()}
+        ds = BatchDataset(store, "geodesic", 0, 200, False, 5, 1 / 16, 3 / 16, 4)
+        ctx = gtrain.Dist(rank, 2)
+        keys = gtrain.single_mesh_keys(["grid", "sphere", "ellipsoid_a", "ellipsoid_b"], ctx)
+        gtrain.warm_decoder(model, (ds[k] for k in keys), 20, 3e-3, torch.device("cpu"),
+                            logging.getLogger("test"), ctx, pairs_per_step=256)
+        assert not torch.equal(model.distance.mlp[0].weight, initial["mlp.0.weight"])
+        torch.save(model.distance.state_dict(), Path(out) / f"decoder{rank}.pt")
+        train(TrainConfig(store=store, run=str(Path(out) / "lm"), epochs=1, batch_size=1, pairs_per_mesh=200,
+                          decoder_warmup=10), small_config(landmarks=4))
     finally:
         dist.destroy_process_group()
 
@@ -119,3 +133,7 @@ def test_ddp_two_processes_average_gradients(tiny_store, tmp_path):
         torch.testing.assert_close(ddp_grads[k], p.grad, atol=1e-6, rtol=1e-4)
     with open(tmp_path / "run" / "metrics.csv") as f:
         assert len(list(csv.DictReader(f))) == 1
+    decoders = [torch.load(tmp_path / f"decoder{r}.pt", weights_only=True) for r in (0, 1)]
+    assert all(torch.equal(decoders[0][k], decoders[1][k]) for k in decoders[0])
+    log = (tmp_path / "lm" / "train.log").read_text()
+    assert "decoder warm-up: 10 steps on 2 meshes' codes per process" in log and "epoch 0" in log
