@@ -355,6 +355,15 @@ def train(cfg: TrainConfig, model_config: GeGnnConfig | None = None) -> list[dic
     if resume is not None:  # continue with the run's own options
         saved = {k: v for k, v in resume.metadata["train_config"].items() if k not in RESUME_KEEPS}
         cfg = dataclasses.replace(cfg, **saved)
+    previous = torch.are_deterministic_algorithms_enabled()
+    torch.use_deterministic_algorithms(previous or cfg.deterministic)
+    try:
+        return _train(cfg, model_config, resume, run)
+    finally:
+        torch.use_deterministic_algorithms(previous)
+
+
+def _train(cfg: TrainConfig, model_config, resume, run: Path) -> list[dict]:
     device = pick_device(cfg.device)
     ctx = setup_distributed(device)
     if ctx.main:
@@ -363,8 +372,6 @@ def train(cfg: TrainConfig, model_config: GeGnnConfig | None = None) -> list[dic
         dist.barrier()
     log = run_logger(run, ctx.main)
 
-    if cfg.deterministic:
-        torch.use_deterministic_algorithms(True)
     torch.manual_seed(cfg.seed)
     model, optimizer, start_epoch, step, best = build_model(cfg, model_config, resume, device, log)
     store = GeodesicStore(cfg.store, cfg.distance)
@@ -386,8 +393,10 @@ def train(cfg: TrainConfig, model_config: GeGnnConfig | None = None) -> list[dic
     workers = auto_workers(device) if cfg.workers is None else cfg.workers
     val_loader = make_loader(val_dataset, single_mesh_keys(val_ids, ctx), workers, device)
     if cfg.decoder_warmup and start_epoch == 0:
-        warm_decoder(model, make_loader(dataset, single_mesh_keys(train_ids, ctx), workers, device, persistent=False),
-                     cfg.decoder_warmup, WARMUP_LR, device, log, ctx)
+        # A rank beyond the number of meshes borrows one: every rank must take part in the all-reduces.
+        keys = single_mesh_keys(train_ids, ctx) or [(VAL_EPOCH, (train_ids[ctx.rank % len(train_ids)],))]
+        warm_decoder(model, make_loader(dataset, keys, workers, device, persistent=False), cfg.decoder_warmup,
+                     WARMUP_LR, device, log, ctx)
         log.info(f"after the decoder warm-up: val_mre {validate(model, val_loader, device, ctx):.4f}")
     net = torch.nn.parallel.DistributedDataParallel(model) if ctx.world > 1 else model
     sampler = EpochSampler(train_ids, cfg.seed, cfg.batch_size, ctx.rank, ctx.world)

@@ -25,7 +25,9 @@ def test_overfit_one_mesh_below_3_percent(one_mesh_store):
 
 
 def config(store, run, **kw):
-    options = dict(epochs=2, batch_size=2, lr=2e-3, pairs_per_mesh=400, warmup_epochs=0.5, clip_grad=1.0)
+    # deterministic: where a GPU is present (device auto), resume must be bitwise there too
+    options = dict(epochs=2, batch_size=2, lr=2e-3, pairs_per_mesh=400, warmup_epochs=0.5, clip_grad=1.0,
+                   deterministic=True)
     return TrainConfig(store=store, run=str(run), **{**options, **kw})
 
 
@@ -98,7 +100,7 @@ def _ddp_worker(rank, port, store, out):
         if rank == 0:
             torch.save({k: p.grad for k, p in model.named_parameters()}, Path(out) / "ddp_grads.pt")
         train(TrainConfig(store=store, run=str(Path(out) / "run"), epochs=1, batch_size=1,
-                          pairs_per_mesh=200), small_config())
+                          pairs_per_mesh=200, device="cpu"), small_config())
         # The decoder warm-up runs on every rank, each on its own meshes and pairs, gradients averaged.
         torch.manual_seed(0)
         model = GeGnn(small_config(landmarks=4))
@@ -111,7 +113,7 @@ def _ddp_worker(rank, port, store, out):
         assert not torch.equal(model.distance.mlp[0].weight, initial["mlp.0.weight"])
         torch.save(model.distance.state_dict(), Path(out) / f"decoder{rank}.pt")
         train(TrainConfig(store=store, run=str(Path(out) / "lm"), epochs=1, batch_size=1, pairs_per_mesh=200,
-                          decoder_warmup=10), small_config(landmarks=4))
+                          decoder_warmup=10, device="cpu"), small_config(landmarks=4))
     finally:
         dist.destroy_process_group()
 
