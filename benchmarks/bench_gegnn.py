@@ -39,28 +39,32 @@ def timed(fn, repeat=3):
     return best, out
 
 
-def write_store(path, v, f, pairs=600_000, seed=0):
-    """One mesh in the store layout; distances are Euclidean stand-ins (only throughput matters here)."""
+def write_store(path, meshes: dict, pairs=600_000, seed=0):
+    """Meshes {id: (V, F)} in the store layout; distances are Euclidean stand-ins (only throughput
+    matters here)."""
     import zarr
 
     rng = np.random.default_rng(seed)
-    v = normalize(Mesh(v, f)).vertices
     root = zarr.open_group(path, mode="w")
     root.attrs["geodata_format"] = 1
-    g = root.create_group("meshes").create_group("torus")
-    for name, data in [("vertices", v.astype(np.float32)), ("faces", f.astype(np.int32)),
-                       ("normals", vertex_normals(Mesh(v, f)).astype(np.float32)), ("edges", unique_edges(f).astype(np.int32))]:
-        g.create_array(name, data=data)
-    p = rng.integers(0, len(v), (pairs, 2)).astype(np.uint32)
-    geo = g.create_group("geodesic")
-    geo.create_array("pairs", data=p)
-    geo.create_array("distances", data=np.linalg.norm(v[p[:, 0]] - v[p[:, 1]], axis=1).astype(np.float32))
-    g.attrs["status"] = "ok"
+    group = root.create_group("meshes")
+    for mesh_id, (v, f) in meshes.items():
+        v = normalize(Mesh(v, f)).vertices
+        g = group.create_group(mesh_id)
+        for name, data in [("vertices", v.astype(np.float32)), ("faces", f.astype(np.int32)),
+                           ("normals", vertex_normals(Mesh(v, f)).astype(np.float32)),
+                           ("edges", unique_edges(f).astype(np.int32))]:
+            g.create_array(name, data=data)
+        p = rng.integers(0, len(v), (pairs, 2)).astype(np.uint32)
+        geo = g.create_group("geodesic")
+        geo.create_array("pairs", data=p)
+        geo.create_array("distances", data=np.linalg.norm(v[p[:, 0]] - v[p[:, 1]], axis=1).astype(np.float32))
+        g.attrs["status"] = "ok"
 
 
 def bench_training(v, f, channels, steps, pairs_per_mesh):
     with tempfile.TemporaryDirectory() as d:
-        write_store(d + "/s.zarr", v, f)
+        write_store(d + "/s.zarr", {"torus": (v, f)})
         torch.manual_seed(0)
         model = GeGnn(GeGnnConfig(channels=channels, embed_dim=channels, decoder_hidden=channels))
         ds = BatchDataset(d + "/s.zarr", "geodesic", 0, pairs_per_mesh, True, 5, 1 / 16, 3 / 16)

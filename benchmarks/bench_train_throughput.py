@@ -24,12 +24,11 @@ import numpy as np
 import torch
 import trimesh
 
+from bench_gegnn import write_store  # benchmarks/ is on sys.path when a script there runs
 from gegnn import GeGnn, GeGnnConfig
 from gegnn.data import LANDMARK_DRAWS, VAL_EPOCH, BatchDataset, EpochSampler
 from gegnn.landmark_cache import LandmarkCache, geometry_key
 from gegnn.train import lr_at, make_loader, train_step
-from geodata.mesh import Mesh, unique_edges, vertex_normals
-from geodata.stages.normalize import normalize
 
 
 def tori(n: int) -> dict:
@@ -40,27 +39,6 @@ def tori(n: int) -> dict:
                                    minor_sections=50)
         out[f"torus{k}"] = (np.asarray(m.vertices), np.asarray(m.faces))
     return out
-
-
-def write_store(path: str, meshes: dict, pairs: int = 600_000, seed: int = 0) -> None:
-    import zarr
-
-    rng = np.random.default_rng(seed)
-    root = zarr.open_group(path, mode="w")
-    root.attrs["geodata_format"] = 1
-    group = root.create_group("meshes")
-    for mesh_id, (v, f) in meshes.items():
-        v = normalize(Mesh(v, f)).vertices
-        g = group.create_group(mesh_id)
-        for name, data in [("vertices", v.astype(np.float32)), ("faces", f.astype(np.int32)),
-                           ("normals", vertex_normals(Mesh(v, f)).astype(np.float32)),
-                           ("edges", unique_edges(f).astype(np.int32))]:
-            g.create_array(name, data=data)
-        p = rng.integers(0, len(v), (pairs, 2)).astype(np.uint32)
-        geo = g.create_group("geodesic")
-        geo.create_array("pairs", data=p)
-        geo.create_array("distances", data=np.linalg.norm(v[p[:, 0]] - v[p[:, 1]], axis=1).astype(np.float32))
-        g.attrs["status"] = "ok"
 
 
 def loader_rate(dataset, mesh_ids, batch_size: int, workers: int, epochs: int) -> float:
