@@ -77,8 +77,8 @@ def _blocks(ctx, param, value):
 @click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True)
 @click.option("--workers", callback=_workers, default="auto", show_default=True, metavar="N|auto",
               help="Loader processes per process building batches (0: in the training process). auto: on a "
-                   "GPU one per spare CPU core, at most 8 (one GPU needs about 4: docs/benchmarks.md); on a "
-                   "CPU 0.")
+                   "GPU one per spare CPU core, at most 8 (one GPU needs about 5-6 at batch 4: docs/gpu.md); "
+                   "on a CPU 0.")
 @click.option("--resume", is_flag=True,
               help="Continue RUN/last.safetensors (its own options): bitwise-exact on a CPU, on a GPU with "
                    "--deterministic.")
