@@ -14,6 +14,7 @@ loader processes needed is then --gpu-step-ms (an estimate, labelled so).
 from __future__ import annotations
 
 import argparse
+import logging
 import math
 import os
 import platform
@@ -26,9 +27,9 @@ import trimesh
 
 from bench_gegnn import write_store  # benchmarks/ is on sys.path when a script there runs
 from gegnn import GeGnn, GeGnnConfig
-from gegnn.data import LANDMARK_DRAWS, VAL_EPOCH, BatchDataset, EpochSampler
-from gegnn.landmark_cache import LandmarkCache, geometry_key
-from gegnn.train import lr_at, make_loader, train_step
+from gegnn.data import LANDMARK_DRAWS, BatchDataset, EpochSampler
+from gegnn.landmark_cache import LandmarkCache
+from gegnn.train import Dist, cpus_per_process, fill_landmark_cache, lr_at, make_loader, train_step
 
 
 def tori(n: int) -> dict:
@@ -97,14 +98,11 @@ def main():
         cache = LandmarkCache(f"{d}/landmarks.zarr", args.landmarks)
         plain = BatchDataset(store, "geodesic", 0, args.pairs_per_mesh, True, 5, 1 / 16, 3 / 16)
         t = time.perf_counter()
-        todo = []
-        for m in ids:
-            g = plain.store.geometry(m)
-            todo += cache.missing([(geometry_key(g.vertices, g.faces), g.vertices, g.faces)], range(LANDMARK_DRAWS))
-        cache.fill(todo, jobs=os.cpu_count() or 1, progress=False)
-        fill = time.perf_counter() - t
-        print(f"landmark cache: {len(todo)} fields (K = {args.landmarks}) in {fill:.1f} s with {os.cpu_count()} "
-              f"processes, {fill / len(todo) * (os.cpu_count() or 1) * 1000:.0f} ms per field and core")
+        fill_landmark_cache(cache.path, args.landmarks, [(plain, ids, range(LANDMARK_DRAWS))], Dist(),
+                            torch.device("cpu"), logging.getLogger(__name__))
+        fill, n = time.perf_counter() - t, len(ids) * LANDMARK_DRAWS
+        print(f"landmark cache: {n} fields (K = {args.landmarks}) in {fill:.1f} s with {cpus_per_process()} "
+              f"processes, {fill / n * cpus_per_process() * 1000:.0f} ms per field and core")
         cached = BatchDataset(store, "geodesic", 0, args.pairs_per_mesh, True, 5, 1 / 16, 3 / 16, args.landmarks,
                               cache.path)
         live = BatchDataset(store, "geodesic", 0, args.pairs_per_mesh, True, 5, 1 / 16, 3 / 16, args.landmarks)

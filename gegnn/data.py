@@ -8,7 +8,7 @@ from __future__ import annotations
 import hashlib
 from collections.abc import Callable
 from dataclasses import dataclass
-from functools import partial
+from functools import cached_property, partial
 
 import numpy as np
 import torch
@@ -33,7 +33,11 @@ class MeshGeometry:
     normals: np.ndarray   # float32 (N, 3)
     edges: np.ndarray     # int64 (E, 2), undirected
     faces: np.ndarray     # int64 (F, 3)
-    key: str = ""         # content hash (gegnn.landmark_cache.geometry_key), set by BatchDataset
+
+    @cached_property
+    def key(self) -> str:
+        """Content hash (:func:`gegnn.landmark_cache.geometry_key`), the landmark cache's key."""
+        return geometry_key(self.vertices, self.faces)
 
 
 class GeodesicStore:
@@ -215,12 +219,9 @@ class BatchDataset(torch.utils.data.Dataset):
         return 0 if epoch == VAL_EPOCH else int(rng.integers(LANDMARK_DRAWS))
 
     def geometry(self, mesh_id: str) -> MeshGeometry:
-        """The mesh's geometry with its content key (:func:`gegnn.landmark_cache.geometry_key`), kept:
-        ~200 kB per 5k-vertex mesh; pairs (~7 MB) are read per use."""
+        """The mesh's geometry, kept: ~200 kB per 5k-vertex mesh; pairs (~7 MB) are read per use."""
         if mesh_id not in self._geometries:
-            g = self.store.geometry(mesh_id)
-            g.key = geometry_key(g.vertices, g.faces)
-            self._geometries[mesh_id] = g
+            self._geometries[mesh_id] = self.store.geometry(mesh_id)
         return self._geometries[mesh_id]
 
     def landmark_fields(self, mesh_id: str, seed: int) -> np.ndarray:

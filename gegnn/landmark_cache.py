@@ -68,13 +68,14 @@ class LandmarkCache:
     def _name(self, key: str, seed: int) -> str:
         return f"k{self.k}/{key}/{seed}"
 
+    def has(self, key: str, seed: int) -> bool:
+        """Whether the fields were completed (their attributes only: no array data is read)."""
+        name = self._name(key, seed)
+        return name in self.root and bool(self.root[name].attrs.get("complete"))
+
     def get(self, key: str, seed: int) -> np.ndarray | None:
         """The fields (N, K) float32, or None where they were never completed."""
-        name = self._name(key, seed)
-        if name not in self.root:
-            return None
-        array = self.root[name]
-        return np.asarray(array[:]) if array.attrs.get("complete") else None
+        return np.asarray(self.root[self._name(key, seed)][:]) if self.has(key, seed) else None
 
     def put(self, key: str, seed: int, fields: np.ndarray) -> None:
         array = self.root.create_array(self._name(key, seed), shape=fields.shape, dtype=np.float32,
@@ -82,9 +83,10 @@ class LandmarkCache:
         array[:] = fields
         array.attrs["complete"] = True
 
-    def missing(self, meshes: Iterable[tuple[str, np.ndarray, np.ndarray]], seeds) -> list:
-        """The ``(key, vertices, faces, seed)`` of ``meshes`` (key, vertices, faces) not yet cached."""
-        return [(key, v, f, s) for key, v, f in meshes for s in seeds if self.get(key, s) is None]
+    def missing(self, meshes: Iterable, seeds) -> list:
+        """The ``(key, vertices, faces, seed)`` of ``meshes`` (objects with ``key``, ``vertices``,
+        ``faces``, as :class:`gegnn.data.MeshGeometry`) not yet cached."""
+        return [(g.key, g.vertices, g.faces, s) for g in meshes for s in seeds if not self.has(g.key, s)]
 
     def fill(self, todo: list, jobs: int = 1, progress: bool = True) -> None:
         """Compute and store the fields of every ``(key, vertices, faces, seed)`` in ``todo`` with ``jobs``

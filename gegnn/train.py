@@ -20,7 +20,7 @@ from tqdm import tqdm
 
 from .checkpoint import load_checkpoint, save_checkpoint
 from .data import LANDMARK_DRAWS, VAL_EPOCH, BatchDataset, EpochSampler, GeodesicStore, split_meshes
-from .landmark_cache import LandmarkCache, geometry_key
+from .landmark_cache import LandmarkCache
 from .model import GeGnn, GeGnnConfig
 
 __all__ = ["TrainConfig", "train", "relative_error", "evaluate_store", "lr_at"]
@@ -509,11 +509,8 @@ def fill_landmark_cache(path: str, k: int, work: list[tuple], ctx: Dist, device,
         cache.create()  # once, before the ranks write into it
     if ctx.world > 1:
         dist.barrier()
-    todo = []
-    for dataset, mesh_ids, seeds in work:
-        for mesh_id in mesh_ids[ctx.rank::ctx.world]:
-            g = dataset.store.geometry(mesh_id)
-            todo += cache.missing([(geometry_key(g.vertices, g.faces), g.vertices, g.faces)], seeds)
+    todo = [item for dataset, mesh_ids, seeds in work
+            for item in cache.missing((dataset.store.geometry(m) for m in mesh_ids[ctx.rank::ctx.world]), seeds)]
     t0 = time.perf_counter()
     cache.fill(todo, jobs=cpus_per_process(), progress=ctx.main)
     total = all_sum([len(todo)], ctx, device)[0]
