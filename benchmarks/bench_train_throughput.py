@@ -6,7 +6,7 @@ loader processes, the model's step time on this machine, and the loader processe
 
 Runs on synthetic 5,000-vertex tori in a temporary store (600k stored pairs each, Euclidean stand-in
 distances: only throughput matters). Three loaders: the paper's model (no landmarks); a landmark model
-reading its fields from the cache training fills first (gegnn.landmark_cache); and, as the reference,
+reading its fields from the cache training fills first (gegnn.fields); and, as the reference,
 a landmark model computing its fields per draw (what a worker did at every new draw before the cache).
 The step time is measured on CUDA where there is one, else on this CPU; the GPU step used for the
 loader processes needed is then --gpu-step-ms (an estimate, labelled so).
@@ -27,9 +27,9 @@ import trimesh
 
 from bench_gegnn import write_store  # benchmarks/ is on sys.path when a script there runs
 from gegnn import GeGnn, GeGnnConfig
-from gegnn.data import LANDMARK_DRAWS, BatchDataset, EpochSampler
-from gegnn.landmark_cache import LandmarkCache
-from gegnn.train import Dist, cpus_per_process, fill_landmark_cache, lr_at, make_loader, train_step
+from gegnn.data import BatchDataset, EpochSampler
+from gegnn.fields import LANDMARK_DRAWS, FieldCache, FieldSpec
+from gegnn.train import Dist, cpus_per_process, fill_field_cache, lr_at, make_loader, train_step
 
 
 def tori(n: int) -> dict:
@@ -95,17 +95,18 @@ def main():
     with tempfile.TemporaryDirectory() as d:
         store = f"{d}/s.zarr"
         write_store(store, meshes)
-        cache = LandmarkCache(f"{d}/landmarks.zarr", args.landmarks)
+        spec = FieldSpec("landmark", args.landmarks)
+        cache = FieldCache(f"{d}/fields.zarr", spec)
         plain = BatchDataset(store, "geodesic", 0, args.pairs_per_mesh, True, 5, 1 / 16, 3 / 16)
         t = time.perf_counter()
-        fill_landmark_cache(cache.path, args.landmarks, [(plain, ids, range(LANDMARK_DRAWS))], Dist(),
+        fill_field_cache(cache.path, spec, [(plain, ids, range(LANDMARK_DRAWS))], Dist(),
                             torch.device("cpu"), logging.getLogger(__name__))
         fill, n = time.perf_counter() - t, len(ids) * LANDMARK_DRAWS
         print(f"landmark cache: {n} fields (K = {args.landmarks}) in {fill:.1f} s with {cpus_per_process()} "
               f"processes, {fill / n * cpus_per_process() * 1000:.0f} ms per field and core")
-        cached = BatchDataset(store, "geodesic", 0, args.pairs_per_mesh, True, 5, 1 / 16, 3 / 16, args.landmarks,
+        cached = BatchDataset(store, "geodesic", 0, args.pairs_per_mesh, True, 5, 1 / 16, 3 / 16, spec,
                               cache.path)
-        live = BatchDataset(store, "geodesic", 0, args.pairs_per_mesh, True, 5, 1 / 16, 3 / 16, args.landmarks)
+        live = BatchDataset(store, "geodesic", 0, args.pairs_per_mesh, True, 5, 1 / 16, 3 / 16, spec)
 
         rates = {}
         print("\nloader (batches/s, after the first batch)")

@@ -85,10 +85,10 @@ def _blocks(ctx, param, value):
 @click.option("--deterministic", is_flag=True,
               help="torch's deterministic algorithms: identical runs and resumes on a GPU too, where atomic "
                    "scatter-adds otherwise sum in a varying order (slower; CPU runs are deterministic anyway).")
-@click.option("--landmark-cache", type=click.Path(file_okay=False),
-              help="Zarr cache of the landmark fields, filled before the first step and read by every loader "
-                   "worker and rank (default RUN/landmarks.zarr; keyed by mesh content, so runs may share "
-                   "one). ~2.5 MB per mesh and draw at K = 128, 5k vertices.")
+@click.option("--field-cache", type=click.Path(file_okay=False),
+              help="Zarr cache of the landmark fields or spectral codes, filled before the first step and read "
+                   "by every loader worker and rank (default RUN/fields.zarr; keyed by mesh content, so runs "
+                   "may share one). ~2.5 MB per mesh and draw at K = 128, 5k vertices.")
 @click.option("--init", "init_ckpt", type=click.Path(exists=True, dir_okay=False), help="Start from these weights.")
 @click.option("--channels", default=256, show_default=True)
 @click.option("--blocks", callback=_blocks, help="ResBlocks per level, encoder = decoder [2,3,3,3,2].")
@@ -103,6 +103,11 @@ def _blocks(ctx, param, value):
                    "is kept and the landmark decoder starts fresh.")
 @click.option("--landmark-no-embedding", is_flag=True, help="Ablation: the decoder reads landmarks only.")
 @click.option("--landmark-no-euclidean", is_flag=True, help="Ablation: drop the straight-line distance input.")
+@click.option("--spectral", default=0, show_default=True, metavar="M",
+              help="Biharmonic model (with --distance biharmonic): M truncated spectral modes per mesh and their "
+                   "Weyl-law tail, corrected by the decoder from the embeddings (0: none). With --init, the "
+                   "network is kept and the decoder starts as the Weyl estimate.")
+@click.option("--spectral-no-embedding", is_flag=True, help="Ablation: the correction reads no embeddings.")
 @click.option("--decoder-warmup", default=0, show_default=True,
               help="Decoder-only steps on the frozen network's codes before the first epoch (a fresh "
                    "decoder on an --init network; ~10 ms a step on CPU against ~3 s for a network step).")
@@ -110,9 +115,9 @@ def _blocks(ctx, param, value):
               help="d = L exp(MLP), or (ablation) d = L + (U - L) sigmoid(MLP); L, U: the landmark bounds.")
 def train(store, run_dir, epochs, batch_size, lr, weight_decay, warmup_epochs, clip_grad, distance,
           pairs_per_mesh, val_fraction, val_store, no_rotate, seed, device, workers, resume, deterministic,
-          landmark_cache, init_ckpt, channels, blocks, aggr, no_edge_length, no_relative_position, plain_grid_pool,
-          euclidean_decoder, landmarks, landmark_no_embedding, landmark_no_euclidean, decoder_warmup,
-          landmark_output):
+          field_cache, init_ckpt, channels, blocks, aggr, no_edge_length, no_relative_position, plain_grid_pool,
+          euclidean_decoder, landmarks, landmark_no_embedding, landmark_no_euclidean, spectral,
+          spectral_no_embedding, decoder_warmup, landmark_output):
     """Train GeGnn on the geodata store STORE."""
     from .train import TrainConfig, train as run_training
 
@@ -122,7 +127,7 @@ def train(store, run_dir, epochs, batch_size, lr, weight_decay, warmup_epochs, c
                       weight_decay=weight_decay, warmup_epochs=warmup_epochs, clip_grad=clip_grad,
                       distance=distance, pairs_per_mesh=pairs_per_mesh, val_fraction=val_fraction, val_store=val_store,
                       rotate=not no_rotate, seed=seed, device=device, workers=workers, resume=resume,
-                      init=init_ckpt, decoder_warmup=decoder_warmup, landmark_cache=landmark_cache,
+                      init=init_ckpt, decoder_warmup=decoder_warmup, field_cache=field_cache,
                       deterministic=deterministic)
     extra = dict(encoder_blocks=blocks, decoder_blocks=blocks) if blocks else {}
     model_cfg = GeGnnConfig(channels=channels, embed_dim=channels, decoder_hidden=channels, aggr=aggr,
@@ -131,7 +136,7 @@ def train(store, run_dir, epochs, batch_size, lr, weight_decay, warmup_epochs, c
                             decoder="euclidean" if euclidean_decoder else "mlp", landmarks=landmarks,
                             landmark_embedding=not landmark_no_embedding,
                             landmark_euclidean=not landmark_no_euclidean, landmark_output=landmark_output,
-                            **extra)
+                            spectral=spectral, spectral_embedding=not spectral_no_embedding, **extra)
     run_training(cfg, model_cfg)
 
 

@@ -15,8 +15,7 @@ import torch
 from torch import Tensor
 
 from .graph import Graph, directed_edges, disjoint_union, random_rotation
-from .landmark_cache import LandmarkCache, geometry_key
-from .landmarks import landmark_fields
+from .fields import FieldCache, FieldSpec, geometry_key
 from .nn.geopool import Hierarchy, build_hierarchy
 
 __all__ = ["GeodesicStore", "MeshGeometry", "Batch", "split_meshes", "epoch_batches", "sample_mesh",
@@ -24,7 +23,6 @@ __all__ = ["GeodesicStore", "MeshGeometry", "Batch", "split_meshes", "epoch_batc
 
 DISTANCES = ("geodesic", "biharmonic")
 VAL_EPOCH = -1  # rng stream of the fixed validation sample
-LANDMARK_DRAWS = 4  # landmark choices per training mesh (augmentation; each computed once, gegnn.landmark_cache)
 
 
 @dataclass
@@ -36,7 +34,7 @@ class MeshGeometry:
 
     @cached_property
     def key(self) -> str:
-        """Content hash (:func:`gegnn.landmark_cache.geometry_key`), the landmark cache's key."""
+        """Content hash (:func:`gegnn.fields.geometry_key`), the field cache's key."""
         return geometry_key(self.vertices, self.faces)
 
 
@@ -113,7 +111,7 @@ class Sample:
     graph: Graph
     pairs: Tensor      # long (P, 2), local vertex indices
     distances: Tensor  # float (P,)
-    fields: Tensor | None = None  # float (N, K) landmark distance fields, for a landmark-guided model
+    fields: Tensor | None = None  # float (N, C) landmark fields or spectral codes (gegnn.fields)
 
 
 @dataclass
@@ -145,7 +143,7 @@ def sample_mesh(geometry: MeshGeometry, pairs: np.ndarray, distances: np.ndarray
                 fields: np.ndarray | None = None) -> Sample:
     """Pick ``num_pairs`` stored pairs (all if None or more than stored) and, with ``rotate``, rotate
     coordinates and normals by one random rotation (distances are invariant, the network is not).
-    ``fields``: the mesh's landmark distance fields (N, K), for a landmark-guided model."""
+    ``fields``: the mesh's fields (N, C) for a model that reads them (:mod:`gegnn.fields`)."""
     v, n = geometry.vertices, geometry.normals
     if rotate:
         r = random_rotation(rng).astype(np.float32)
@@ -178,19 +176,19 @@ class BatchDataset(torch.utils.data.Dataset):
         num_pairs: pairs per mesh (None: all stored pairs).
         rotate: random rotation augmentation.
         levels, sigma_c, sigma_n: the model's GeoPool settings.
-        landmarks: K landmark fields per mesh (0: none). Training draws one of ``LANDMARK_DRAWS``
-            landmark choices (seeds) per (epoch, mesh) as augmentation; validation uses seed 0, as
-            ``GeGnn.embed`` does.
-        landmark_cache: a :class:`gegnn.landmark_cache.LandmarkCache` path the fields are read from
-            (training fills it first); fields missing there, or without a cache, are computed per use.
+        fields: the per-vertex fields the model reads (:class:`gegnn.fields.FieldSpec`; None: none).
+            Training draws one of ``fields.draws`` choices (seeds: landmark draws) per (epoch, mesh) as
+            augmentation; validation uses seed 0, as ``GeGnn.embed`` does.
+        field_cache: a :class:`gegnn.fields.FieldCache` path the fields are read from (training fills it
+            first); fields missing there, or without a cache, are computed per use.
     """
 
     def __init__(self, store_path, distance, seed, num_pairs, rotate, levels, sigma_c, sigma_n,
-                 landmarks: int = 0, landmark_cache: str | None = None):
+                 fields: FieldSpec | None = None, field_cache: str | None = None):
         self.store_path, self.distance, self.seed = str(store_path), distance, seed
-        self.num_pairs, self.rotate, self.landmarks = num_pairs, rotate, landmarks
+        self.num_pairs, self.rotate, self.fields = num_pairs, rotate, fields
         self.levels, self.sigma_c, self.sigma_n = levels, sigma_c, sigma_n
-        self.landmark_cache = landmark_cache
+        self.field_cache = field_cache
         self._store, self._geometries, self._cache = None, {}, None
 
     @property
@@ -208,15 +206,14 @@ class BatchDataset(torch.utils.data.Dataset):
         rng = np.random.default_rng([self.seed, epoch + 1, mesh_hash(mesh_id)])  # epoch -1 -> 0 is val
         pairs, distances = self.store.pairs(mesh_id)
         fields = None
-        if self.landmarks:
-            fields = self.landmark_fields(mesh_id, self.landmark_seed(epoch, rng))
+        if self.fields is not None:
+            fields = self.mesh_fields(mesh_id, self.field_seed(epoch, rng))
         return sample_mesh(self.geometry(mesh_id), pairs, distances, rng, self.num_pairs,
                            self.rotate and epoch != VAL_EPOCH, fields)
 
-    @staticmethod
-    def landmark_seed(epoch: int, rng: np.random.Generator) -> int:
-        """The landmark draw of a sample: seed 0 for validation, else one of ``LANDMARK_DRAWS``."""
-        return 0 if epoch == VAL_EPOCH else int(rng.integers(LANDMARK_DRAWS))
+    def field_seed(self, epoch: int, rng: np.random.Generator) -> int:
+        """The field draw of a sample: seed 0 for validation, else one of ``fields.draws``."""
+        return 0 if epoch == VAL_EPOCH else int(rng.integers(self.fields.draws))
 
     def geometry(self, mesh_id: str) -> MeshGeometry:
         """The mesh's geometry, kept: ~200 kB per 5k-vertex mesh; pairs (~7 MB) are read per use."""
@@ -224,15 +221,15 @@ class BatchDataset(torch.utils.data.Dataset):
             self._geometries[mesh_id] = self.store.geometry(mesh_id)
         return self._geometries[mesh_id]
 
-    def landmark_fields(self, mesh_id: str, seed: int) -> np.ndarray:
+    def mesh_fields(self, mesh_id: str, seed: int) -> np.ndarray:
         g = self.geometry(mesh_id)
-        if self.landmark_cache is not None:
+        if self.field_cache is not None:
             if self._cache is None:
-                self._cache = LandmarkCache(self.landmark_cache, self.landmarks)
+                self._cache = FieldCache(self.field_cache, self.fields)
             cached = self._cache.get(g.key, seed)
             if cached is not None:
                 return cached
-        return landmark_fields(g.vertices, g.faces, self.landmarks, seed).distances
+        return self.fields.compute(g.vertices, g.faces, seed)
 
     def __getstate__(self):  # worker processes reopen the store themselves
         return {**self.__dict__, "_store": None, "_geometries": {}, "_cache": None}

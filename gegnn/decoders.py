@@ -11,7 +11,9 @@ import contextlib
 import torch
 from torch import Tensor, nn
 
-__all__ = ["DistanceDecoder", "LandmarkDecoder", "MLP", "mlp"]
+from .spectral import weyl_shape, weyl_table
+
+__all__ = ["DistanceDecoder", "LandmarkDecoder", "SpectralDecoder", "MLP", "mlp"]
 
 MAX_LOG_RATIO = 5.0  # a ratio decoder never predicts more than e^5 = 148 times the lower bound
 
@@ -155,6 +157,73 @@ class LandmarkDecoder(nn.Module):
         else:
             d = lower + (upper - lower).clamp_min(0) * torch.sigmoid(t)
         return torch.where(lower > 0, d, torch.zeros_like(d))
+
+    def forward(self, a: Tensor, b: Tensor) -> Tensor:
+        x, extra = self.inputs(a, b)
+        return self.output(self.mlp(x), extra)
+
+
+class SpectralDecoder(nn.Module):
+    r"""Biharmonic distance from truncated spectral codes, their Weyl-law tail and the embeddings
+    (biharmonic GeGnn; :mod:`gegnn.spectral` derives the tail).
+
+    With :math:`d_m^2 = \sum_{k \le m} (s_k(i) - s_k(j))^2` (a lower bound), the tail scale
+    :math:`\tau` and :math:`w = \tau F(r / \sqrt{2\pi\tau})` the Weyl estimate of the rest:
+
+    .. math::
+        d_{ij}^2 = d_m^2 + w\, e^{\mathrm{MLP}(\mathbf{x}_{ij})}, \qquad
+        \mathbf{x}_{ij} = \Big[(\mathbf{e}_i - \mathbf{e}_j)^2,\; F,\; \frac{d_m^2}{d_m^2 + w},\;
+        \log\frac{r}{\sqrt{2\pi\tau}}\Big]
+
+    with r the straight-line distance of the normalized positions. So :math:`d \ge d_m` always, d is
+    symmetric, exactly 0 for i = j (both terms vanish there, with no special case), and a query costs
+    O(m + D). The MLP's last layer starts at zero: the decoder starts as the Weyl estimate itself.
+
+    A vertex code is ``[e (D) | s (m) | tau (1) | p (3)]`` (see :meth:`codes`).
+
+    Args:
+        embed_dim: embedding width D.
+        modes: m.
+        hidden: MLP width.
+        embedding: read the embedding difference (off: the correction sees the spectral features only).
+
+    Shapes:
+        - **input:** :math:`(P, D + m + 4)`, :math:`(P, D + m + 4)`
+        - **output:** :math:`(P,)`
+    """
+
+    def __init__(self, embed_dim: int, modes: int, hidden: int, embedding: bool = True):
+        super().__init__()
+        self.embed_dim, self.m, self.embedding = embed_dim, modes, embedding
+        self.mlp = mlp((embed_dim if embedding else 0) + 3, hidden)
+        nn.init.zeros_(self.mlp[-1].weight)
+        nn.init.zeros_(self.mlp[-1].bias)
+        self.register_buffer("weyl", weyl_table(), persistent=False)
+
+    @staticmethod
+    def codes(embeddings: Tensor, spectral: Tensor, positions: Tensor) -> Tensor:
+        """Per-vertex codes ``[e | s | tau | p]`` (N, D + m + 4) in fp32 (``spectral``: (N, m + 1), as
+        :func:`gegnn.spectral.spectral_codes`)."""
+        return torch.cat([embeddings.float(), spectral.float(), positions.float()], dim=1)
+
+    def inputs(self, a: Tensor, b: Tensor) -> tuple[Tensor, tuple[Tensor, Tensor]]:
+        d, m = self.embed_dim, self.m
+        fa, fb = a[:, d:].detach(), b[:, d:].detach()  # spectral codes and positions: inputs, never learned
+        bound = (fa[:, :m] - fb[:, :m]).square_().sum(dim=1)
+        tau = (fa[:, m] + fb[:, m]).mul_(0.5)
+        r = (fa[:, m + 1:] - fb[:, m + 1:]).norm(dim=1)
+        s = r * (2 * torch.pi * tau).clamp_min(1e-30).rsqrt()
+        shape = weyl_shape(s, self.weyl)
+        tail = tau * shape
+        feats = [shape, bound / (bound + tail).clamp_min(1e-30), s.clamp_min(1e-6).log()]
+        parts = [torch.stack(feats, dim=1)]
+        if self.embedding:
+            parts.insert(0, (a[:, :d] - b[:, :d]).square())
+        return torch.cat(parts, dim=1), (bound, tail)
+
+    def output(self, t: Tensor, extra: tuple[Tensor, Tensor]) -> Tensor:
+        bound, tail = extra
+        return (bound + tail * t.squeeze(1).float().clamp(max=MAX_LOG_RATIO).exp()).sqrt()
 
     def forward(self, a: Tensor, b: Tensor) -> Tensor:
         x, extra = self.inputs(a, b)

@@ -15,12 +15,13 @@ from torch import Tensor, nn
 from geodata.mesh import Mesh, unique_edges, vertex_normals
 from geodata.stages.normalize import normalization
 
-from .decoders import DistanceDecoder, LandmarkDecoder
+from .decoders import DistanceDecoder, LandmarkDecoder, SpectralDecoder
 from .graph import Graph, directed_edges
 from .landmarks import landmark_fields
 from .nn import GeoConv, GeoPool, GeoUnpool, Hierarchy, ResBlocks, build_hierarchy
+from .spectral import spectral_codes
 
-__all__ = ["GeGnnConfig", "GeGnn", "DistanceDecoder", "LandmarkDecoder"]
+__all__ = ["GeGnnConfig", "GeGnn", "DistanceDecoder", "LandmarkDecoder", "SpectralDecoder"]
 
 # Shipped models, in gegnn/weights/, made by `gegnn export` (docs/model-card.md); the first is the default.
 PRETRAINED = {
@@ -57,6 +58,10 @@ class GeGnnConfig:
     landmark_embedding: bool = True           # the decoder reads the embedding difference
     landmark_euclidean: bool = True           # ... and the straight-line distance
     landmark_output: str = "ratio"            # "ratio": d = L exp(MLP); "interval": d = L + (U - L) sigmoid(MLP)
+    # Biharmonic distances (0 = none): m truncated spectral modes per component and their Weyl-law tail,
+    # corrected by a SpectralDecoder that reads the embeddings (gegnn.spectral).
+    spectral: int = 0
+    spectral_embedding: bool = True           # the correction reads the embedding difference
 
     def __post_init__(self):
         object.__setattr__(self, "encoder_blocks", tuple(self.encoder_blocks))
@@ -69,8 +74,15 @@ class GeGnnConfig:
             raise ValueError(f"decoder must be 'mlp' or 'euclidean', got {self.decoder!r}")
         if self.landmark_output not in ("ratio", "interval"):
             raise ValueError(f"landmark_output must be 'ratio' or 'interval', got {self.landmark_output!r}")
-        if self.landmarks < 0:
-            raise ValueError(f"landmarks must be >= 0, got {self.landmarks}")
+        if self.landmarks < 0 or self.spectral < 0:
+            raise ValueError(f"landmarks and spectral must be >= 0, got {self.landmarks} and {self.spectral}")
+        if self.landmarks and self.spectral:
+            raise ValueError("a model reads landmark fields (geodesic) or spectral codes (biharmonic), not both")
+
+    @property
+    def fields(self) -> int:
+        """Columns of the per-vertex fields the decoder reads besides the embedding (0: none)."""
+        return self.landmarks or (self.spectral + 1 if self.spectral else 0)
 
     @property
     def levels(self) -> int:
@@ -110,6 +122,9 @@ class GeGnn(nn.Module):
             self.distance = LandmarkDecoder(config.embed_dim, config.landmarks, config.decoder_hidden,
                                             config.landmark_embedding,
                                             config.landmark_euclidean, config.landmark_output)
+        elif config.spectral:
+            self.distance = SpectralDecoder(config.embed_dim, config.spectral, config.decoder_hidden,
+                                            config.spectral_embedding)
         else:
             self.distance = DistanceDecoder(config.embed_dim, config.decoder_hidden, config.decoder)
 
@@ -129,8 +144,8 @@ class GeGnn(nn.Module):
     # -- network ------------------------------------------------------------------------------------
     def forward(self, h: Hierarchy, pairs: Tensor | None = None, fields: Tensor | None = None) -> Tensor:
         """Vertex codes of the level-0 vertices of ``h``: the embeddings (N, embed_dim), or with
-        landmarks the decoder's codes ``[e | fields | pos]`` (``fields``: (N, K) landmark distances in
-        normalized units). With ``pairs`` (P, 2) indexing those vertices, the decoded distances (P,)
+        landmarks or spectral modes the decoder's codes ``[e | fields | pos]`` (``fields``: (N, K) landmark
+        distances or (N, m + 1) spectral codes, in normalized units). With ``pairs`` (P, 2) indexing those vertices, the decoded distances (P,)
         instead (one call, so DistributedDataParallel sees the decoder's parameters used inside forward)."""
         z = self.codes(self._unet(h), h, fields)
         if pairs is None:
@@ -142,12 +157,16 @@ class GeGnn(nn.Module):
         """The vertex codes from the U-Net's output features ``trunk`` (N, channels): the head, and with
         landmarks the landmark fields and positions appended (see ``forward``)."""
         z = self.head(trunk)
-        if self.config.landmarks:
-            if fields is None or fields.shape != (len(z), self.config.landmarks):
-                raise ValueError(f"a model with landmarks={self.config.landmarks} needs fields of shape "
-                                 f"({len(z)}, {self.config.landmarks})")
-            z = LandmarkDecoder.codes(z, fields, h.graphs[0].pos)
+        width = self.config.fields
+        if width:
+            if fields is None or fields.shape != (len(z), width):
+                raise ValueError(f"this model ({self._fields_name()}) needs fields of shape ({len(z)}, {width})")
+            z = type(self.distance).codes(z, fields, h.graphs[0].pos)
         return z
+
+    def _fields_name(self) -> str:
+        c = self.config
+        return f"landmarks={c.landmarks}" if c.landmarks else f"spectral={c.spectral}"
 
     def _unet(self, h: Hierarchy) -> Tensor:
         g = h.graphs[0]
@@ -198,8 +217,8 @@ class GeGnn(nn.Module):
 
     def inputs(self, vertices: np.ndarray, faces: np.ndarray, device) -> tuple[Hierarchy, Tensor | None, float]:
         """What the network reads for one mesh in any units: the GeoPool hierarchy of the normalized mesh
-        (bounding box centered, longest half-extent 1), the landmark fields in normalized units (None
-        without landmarks) and the scale back to the input's units."""
+        (bounding box centered, longest half-extent 1), the landmark fields or spectral codes in normalized
+        units (None for the paper's model) and the scale back to the input's units."""
         vertices, faces = _validated(vertices, faces)
         center, scale = normalization(vertices)
         scale = scale or 1.0  # a single point: keep units
@@ -209,6 +228,8 @@ class GeGnn(nn.Module):
         if self.config.landmarks:
             fields = torch.as_tensor(landmark_fields(mesh.vertices, mesh.faces, self.config.landmarks).distances,
                                      device=device)
+        elif self.config.spectral:
+            fields = torch.as_tensor(spectral_codes(mesh.vertices, mesh.faces, self.config.spectral), device=device)
         return self.hierarchy(graph).to(device), fields, scale
 
     def finetune(self, vertices: np.ndarray, faces: np.ndarray, **options):

@@ -19,15 +19,17 @@ import torch.distributed as dist
 from tqdm import tqdm
 
 from .checkpoint import load_checkpoint, save_checkpoint
-from .data import LANDMARK_DRAWS, VAL_EPOCH, BatchDataset, EpochSampler, GeodesicStore, split_meshes
-from .landmark_cache import LandmarkCache
+from .data import VAL_EPOCH, BatchDataset, EpochSampler, GeodesicStore, split_meshes
+from .fields import FieldCache, FieldSpec
 from .model import GeGnn, GeGnnConfig
 
 __all__ = ["TrainConfig", "train", "relative_error", "evaluate_store", "lr_at"]
 
 METRICS = ["epoch", "step", "lr", "train_mre", "val_mre", "seconds"]
 METRIC_EPS = 1e-3  # offset of the relative error's denominator, in normalized units
-RESUME_KEEPS = ("epochs", "device", "workers", "landmark_cache")  # options a resumed run takes from the command line
+# Options a resumed run takes from the command line ("landmark_cache": field_cache's name in older runs).
+RESUME_KEEPS = ("epochs", "device", "workers", "field_cache", "landmark_cache")
+DECODER_OPTIONS = ("decoder", "landmark", "spectral")  # GeGnnConfig fields of the decoder (name prefixes)
 WARMUP_LR = 1e-3  # decoder warm-up: a small MLP on fixed codes (the network's --lr is usually lower)
 WARMUP_BYTES = 2 << 30  # decoder warm-up: codes and pairs kept on the device, per rank
 MAX_AUTO_WORKERS = 8  # --workers auto on a GPU: one per spare CPU core, at most this many (docs/benchmarks.md)
@@ -55,7 +57,7 @@ class TrainConfig:
     resume: bool = False
     init: str | None = None
     decoder_warmup: int = 0          # decoder-only steps on frozen network codes before the first epoch
-    landmark_cache: str | None = None  # landmark fields' zarr cache (None: RUN/landmarks.zarr)
+    field_cache: str | None = None  # zarr cache of the landmark fields or spectral codes (None: RUN/fields.zarr)
     deterministic: bool = False      # torch's deterministic algorithms: bitwise-exact resume on CUDA too
 
 
@@ -381,15 +383,15 @@ def _train(cfg: TrainConfig, model_config, resume, run: Path) -> list[dict]:
         train_ids, val_ids = split_meshes(store.mesh_ids, cfg.val_fraction)
     if not train_ids:
         raise ValueError(f"{cfg.store}: no committed meshes with {cfg.distance} distances")
-    cache = (cfg.landmark_cache or str(run / "landmarks.zarr")) if model.config.landmarks else None
+    spec = FieldSpec.of(model.config)
+    cache = (cfg.field_cache or str(run / "fields.zarr")) if spec else None
     dataset, val_dataset = (BatchDataset(path, cfg.distance, cfg.seed, cfg.pairs_per_mesh, cfg.rotate,
                                          model.config.levels, model.config.sigma_c, model.config.sigma_n,
-                                         model.config.landmarks, cache)
+                                         spec, cache)
                             for path in (cfg.store, cfg.val_store or cfg.store))
     if cache:
-        fill_landmark_cache(cache, model.config.landmarks,
-                            [(dataset, train_ids, range(LANDMARK_DRAWS)), (val_dataset, val_ids, [0])], ctx, device,
-                            log)
+        fill_field_cache(cache, spec, [(dataset, train_ids, range(spec.draws)), (val_dataset, val_ids, [0])],
+                         ctx, device, log)
     workers = auto_workers(device) if cfg.workers is None else cfg.workers
     val_loader = make_loader(val_dataset, single_mesh_keys(val_ids, ctx), workers, device)
     if cfg.decoder_warmup and start_epoch == 0:
@@ -434,15 +436,18 @@ def _train(cfg: TrainConfig, model_config, resume, run: Path) -> list[dict]:
 def build_model(cfg: TrainConfig, model_config, resume, device, log=None):
     """Model and optimizer, fresh, from ``--init`` weights, or restored from ``--resume``.
 
-    With ``--init`` the network is the checkpoint's; where ``model_config`` asks for landmarks, its
-    landmark options replace the checkpoint's, so a paper model's weights can start a landmark-guided
-    one (the new decoder starts fresh)."""
+    With ``--init`` the network is the checkpoint's; where ``model_config`` asks for a decoder of its own
+    (landmarks, spectral modes or the Euclidean decoder), its decoder options replace the checkpoint's,
+    so a paper model's weights can start a landmark-guided or a biharmonic one (the new decoder starts
+    fresh)."""
     if resume is not None:
         model_config = resume.config
     elif cfg.init:
         init = load_checkpoint(cfg.init)
+        own_decoder = model_config is not None and (model_config.landmarks or model_config.spectral
+                                                    or model_config.decoder != "mlp")
         guide = {f.name: getattr(model_config, f.name) for f in dataclasses.fields(GeGnnConfig)
-                 if f.name.startswith("landmark")} if model_config is not None and model_config.landmarks else {}
+                 if f.name.startswith(DECODER_OPTIONS)} if own_decoder else {}
         model_config = dataclasses.replace(init.config, **guide)
     model = GeGnn(model_config or GeGnnConfig())
     if cfg.init and resume is None:
@@ -500,11 +505,11 @@ def single_mesh_keys(mesh_ids: list[str], ctx: Dist) -> list[tuple]:
     return [(VAL_EPOCH, (m,)) for m in mesh_ids[ctx.rank::ctx.world]]
 
 
-def fill_landmark_cache(path: str, k: int, work: list[tuple], ctx: Dist, device, log) -> None:
-    """Compute the landmark fields that ``path`` lacks, for ``work``: (dataset, mesh ids, seeds) triples.
-    Every rank takes its share of the meshes and the CPU cores of its share of the node; the fields
-    then serve every loader worker and rank (:mod:`gegnn.landmark_cache`)."""
-    cache = LandmarkCache(path, k)
+def fill_field_cache(path: str, spec: FieldSpec, work: list[tuple], ctx: Dist, device, log) -> None:
+    """Compute the fields that ``path`` lacks, for ``work``: (dataset, mesh ids, seeds) triples. Every
+    rank takes its share of the meshes and the CPU cores of its share of the node; the fields then
+    serve every loader worker and rank (:mod:`gegnn.fields`)."""
+    cache = FieldCache(path, spec)
     if ctx.main:
         cache.create()  # once, before the ranks write into it
     if ctx.world > 1:
@@ -516,7 +521,7 @@ def fill_landmark_cache(path: str, k: int, work: list[tuple], ctx: Dist, device,
     total = all_sum([len(todo)], ctx, device)[0]
     if ctx.world > 1:
         dist.barrier()
-    log.info(f"landmark fields: {int(total)} computed in {time.perf_counter() - t0:.1f} s, cached in {path}")
+    log.info(f"{spec.kind} fields: {int(total)} computed in {time.perf_counter() - t0:.1f} s, cached in {path}")
 
 
 def _identity(batch):
@@ -531,7 +536,7 @@ def evaluate_store(model: GeGnn, store_path, distance: str = "geodesic", mesh_id
     device = torch.device(device)
     model.to(device).eval()
     dataset = BatchDataset(store_path, distance, 0, None, False, model.config.levels,
-                           model.config.sigma_c, model.config.sigma_n, model.config.landmarks)
+                           model.config.sigma_c, model.config.sigma_n, FieldSpec.of(model.config))
     rows = []
     for mesh_id in tqdm(mesh_ids or dataset.store.mesh_ids, desc="eval", leave=False):
         batch = dataset[(VAL_EPOCH, (mesh_id,))].to(device)

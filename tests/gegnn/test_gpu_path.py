@@ -10,7 +10,7 @@ import gegnn.train as gtrain
 from gegnn import GeGnn
 from gegnn.data import Batch, BatchDataset
 from gegnn.decoders import DistanceDecoder, LandmarkDecoder
-from gegnn.landmark_cache import LandmarkCache, geometry_key
+from gegnn.fields import FieldCache, FieldSpec, geometry_key
 from gegnn.landmarks import landmark_fields
 from gegnn.nn import aggregate, scatter_count
 
@@ -25,7 +25,7 @@ def test_training_step_has_no_data_dependent_op(tiny_store, options):
     torch.manual_seed(0)
     model = GeGnn(small_config(**options))
     batch = BatchDataset(tiny_store, "geodesic", 0, 300, True, 5, 1 / 16, 3 / 16,
-                         options.get("landmarks", 0))[(0, ("grid", "sphere"))]
+                         FieldSpec.of(model.config))[(0, ("grid", "sphere"))]
     model.to("meta")
     batch = batch.to("meta")
     loss = gtrain.relative_error(model(batch.hierarchy, batch.pairs, batch.fields), batch.distances).mean()
@@ -80,7 +80,8 @@ def test_loader_pins_every_tensor_of_a_batch(tiny_store, monkeypatch):
     pinned (simulated: pinning needs an accelerator), none is left pageable."""
     from torch.utils.data._utils.pin_memory import pin_memory
 
-    batch = BatchDataset(tiny_store, "geodesic", 0, 300, True, 5, 1 / 16, 3 / 16, 4)[(0, ("grid", "sphere"))]
+    spec = FieldSpec("landmark", 4)
+    batch = BatchDataset(tiny_store, "geodesic", 0, 300, True, 5, 1 / 16, 3 / 16, spec)[(0, ("grid", "sphere"))]
     pinned_ids = set()
 
     def fake_pin(t, *args, **kwargs):
@@ -162,8 +163,8 @@ def test_training_fills_the_landmark_cache_and_workers_only_read_it(tiny_store, 
     cfg = gtrain.TrainConfig(store=tiny_store, run=str(tmp_path / "run"), epochs=1, batch_size=2,
                              pairs_per_mesh=200, workers=0)
     gtrain.train(cfg, small_config(landmarks=4))
-    cache = LandmarkCache(tmp_path / "run" / "landmarks.zarr", 4)
-    ds = BatchDataset(tiny_store, "geodesic", 0, 200, True, 5, 1 / 16, 3 / 16, 4, str(cache.path))
+    cache = FieldCache(tmp_path / "run" / "fields.zarr", FieldSpec("landmark", 4))
+    ds = BatchDataset(tiny_store, "geodesic", 0, 200, True, 5, 1 / 16, 3 / 16, cache.spec, str(cache.path))
     train_ids, val_ids = gtrain.split_meshes(ds.store.mesh_ids, cfg.val_fraction)
     g = ds.store.geometry(train_ids[0])
     np.testing.assert_array_equal(cache.get(geometry_key(g.vertices, g.faces), 3),
@@ -172,7 +173,7 @@ def test_training_fills_the_landmark_cache_and_workers_only_read_it(tiny_store, 
     def no_compute(*args, **kwargs):
         raise AssertionError("a landmark field was computed, not read from the cache")
 
-    monkeypatch.setattr("gegnn.data.landmark_fields", no_compute)
+    monkeypatch.setattr("gegnn.fields.landmark_fields", no_compute)
     for epoch in (-1, 0, 1, 2):
         for mesh_id in train_ids + [(-1, m) for m in val_ids]:
             if isinstance(mesh_id, tuple):  # validation meshes: seed 0 only
@@ -181,7 +182,7 @@ def test_training_fills_the_landmark_cache_and_workers_only_read_it(tiny_store, 
     log = (tmp_path / "run" / "train.log").read_text()
     assert f"landmark fields: {4 * len(train_ids) + len(val_ids)} computed" in log  # 4 draws; val: seed 0
     cache_again = gtrain.TrainConfig(**{**cfg.__dict__, "run": str(tmp_path / "run2"),
-                                        "landmark_cache": str(cache.path)})
+                                        "field_cache": str(cache.path)})
     gtrain.train(cache_again, small_config(landmarks=4))
     assert "landmark fields: 0 computed" in (tmp_path / "run2" / "train.log").read_text()
 
@@ -192,7 +193,7 @@ def test_cuda_training_step_never_syncs(tiny_store):
     torch.manual_seed(0)
     model = GeGnn(small_config(landmarks=4)).cuda()
     opt = torch.optim.AdamW(model.parameters())
-    ds = BatchDataset(tiny_store, "geodesic", 0, 300, True, 5, 1 / 16, 3 / 16, 4)
+    ds = BatchDataset(tiny_store, "geodesic", 0, 300, True, 5, 1 / 16, 3 / 16, FieldSpec("landmark", 4))
     batches = [ds[(e, ("grid", "sphere"))].pin_memory() for e in range(3)]
     gtrain.train_step(model, batches[0].to("cuda"), opt, 1e-3, 1.0, torch.device("cuda"))  # warm caches
     torch.cuda.set_sync_debug_mode("error")

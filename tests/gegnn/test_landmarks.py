@@ -12,6 +12,7 @@ from gegnn_stores import ellipsoid, exact_pairs, flat_grid, overfit, small_confi
 from gegnn import GeGnn
 from gegnn.checkpoint import load_checkpoint
 from gegnn.data import BatchDataset
+from gegnn.fields import FieldSpec
 from gegnn.decoders import LandmarkDecoder
 from gegnn.landmarks import landmark_fields
 import gegnn.train as gtrain
@@ -176,7 +177,7 @@ def test_decoder_warmup_trains_the_decoder_alone(tiny_store):
     model = GeGnn(small_config(landmarks=8))
     model.load_state_dict({k: v for k, v in paper.state_dict().items() if not k.startswith("distance.")},
                           strict=False)
-    dataset = BatchDataset(tiny_store, "geodesic", 0, 400, False, 5, 1 / 16, 3 / 16, 8)
+    dataset = BatchDataset(tiny_store, "geodesic", 0, 400, False, 5, 1 / 16, 3 / 16, FieldSpec("landmark", 8))
     ids = ["ellipsoid_a", "ellipsoid_b", "sphere"]
 
     def error():

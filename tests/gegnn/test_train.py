@@ -12,6 +12,7 @@ import gegnn.train as gtrain
 from gegnn import GeGnn
 from gegnn.checkpoint import load_checkpoint
 from gegnn.data import BatchDataset
+from gegnn.fields import FieldSpec
 from gegnn.train import TrainConfig, relative_error, train
 
 
@@ -105,7 +106,7 @@ def _ddp_worker(rank, port, store, out):
         torch.manual_seed(0)
         model = GeGnn(small_config(landmarks=4))
         initial = {k: v.clone() for k, v in model.distance.state_dict().items()}
-        ds = BatchDataset(store, "geodesic", 0, 200, False, 5, 1 / 16, 3 / 16, 4)
+        ds = BatchDataset(store, "geodesic", 0, 200, False, 5, 1 / 16, 3 / 16, FieldSpec("landmark", 4))
         ctx = gtrain.Dist(rank, 2)
         keys = gtrain.single_mesh_keys(["grid", "sphere", "ellipsoid_a", "ellipsoid_b"], ctx)
         gtrain.warm_decoder(model, (ds[k] for k in keys), 20, 3e-3, torch.device("cpu"),
