@@ -49,13 +49,23 @@ def save_checkpoint(path, model, optimizer=None, rng: dict | None = None,
     tmp.replace(path)
 
 
-def load_checkpoint(path, map_location="cpu") -> Checkpoint:
+def read_config(path) -> GeGnnConfig:
+    """The model config of a checkpoint, from its metadata alone (no tensor is read)."""
+    return GeGnnConfig.from_json(_metadata(path)["config"])
+
+
+def _metadata(path) -> dict:
     from safetensors import safe_open
 
     with safe_open(str(path), framework="pt") as f:
         meta = f.metadata() or {}
     if meta.get("format") != FORMAT:
         raise ValueError(f"{path}: not a gegnn checkpoint (format {meta.get('format')!r})")
+    return meta
+
+
+def load_checkpoint(path, map_location="cpu") -> Checkpoint:
+    meta = _metadata(path)
     tensors = load_file(str(path), device=str(map_location))
     model = {k: v for k, v in tensors.items() if not k.startswith((OPT, RNG))}
     opt = _unflatten_optimizer(tensors, meta["optimizer"]) if "optimizer" in meta else None

@@ -143,7 +143,8 @@ def train(store, run_dir, epochs, batch_size, lr, weight_decay, warmup_epochs, c
 @main.command("eval")
 @click.argument("checkpoint", type=click.Path(exists=True, dir_okay=False))
 @click.argument("store", type=click.Path(exists=True, file_okay=False))
-@click.option("--distance", type=click.Choice(["geodesic", "biharmonic"]), default="geodesic", show_default=True)
+@click.option("--distance", type=click.Choice(["geodesic", "biharmonic"]),
+              help="Which stored distances to compare with (default: those the model was trained on).")
 @click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True)
 @click.option("--csv", "csv_path", type=click.Path(dir_okay=False), help="Also write the table as CSV.")
 def evaluate(checkpoint, store, distance, device, csv_path):
@@ -152,6 +153,7 @@ def evaluate(checkpoint, store, distance, device, csv_path):
     from .train import evaluate_store, pick_device
 
     model = GeGnn.from_checkpoint(checkpoint)
+    distance = distance or model.config.distance
     rows = evaluate_store(model, store, distance, device=pick_device(device))
     if not rows:
         raise click.ClickException(f"{store}: no committed meshes with {distance} distances")
@@ -178,8 +180,9 @@ def evaluate(checkpoint, store, distance, device, csv_path):
 @click.option("-o", "--output", type=click.Path(dir_okay=False),
               help="With --source: field.npy (per file vertex), field.ply (colored mesh) or field.png "
                    "(rendered). With --pairs: a CSV i,j,distance (default: stdout).")
-@click.option("--exact", is_flag=True, help="Also compute the exact field (geodata's exact solver) and report "
-                                            "the error; a PNG shows predicted | exact | relative error.")
+@click.option("--exact", is_flag=True, help="Also compute the exact field (geodata's exact solver of the distance "
+                                            "the model predicts: geodesic or biharmonic) and report the error; a "
+                                            "PNG shows predicted | exact | relative error.")
 @click.option("--path", "path_to", type=int, metavar="J",
               help="Trace the geodesic path from --source to vertex J on the predicted field (a PNG draws "
                    "it); with --exact also potpourri3d's exact edge-flip path, and the lengths of both.")
@@ -189,7 +192,8 @@ def evaluate(checkpoint, store, distance, device, csv_path):
 @click.option("--precision", type=click.Choice(["fp32", "bf16"]), default="fp32", show_default=True,
               help="Network precision (bf16: faster on recent CPUs and GPUs).")
 def query(files, pretrained, source, pairs_csv, output, exact, path_to, prepare, device, precision):
-    """Geodesic distances on MESH (OBJ/OFF/PLY/STL/GLB, any units) predicted by CHECKPOINT or --pretrained.
+    """Distances on MESH (OBJ/OFF/PLY/STL/GLB, any units) predicted by CHECKPOINT or --pretrained: geodesic,
+    or biharmonic with a biharmonic model (--pretrained biharmonic).
 
     \b
     Examples:
@@ -197,6 +201,7 @@ def query(files, pretrained, source, pairs_csv, output, exact, path_to, prepare,
       gegnn query --pretrained bunny.obj --source 0 --exact -o compare.png
       gegnn query --pretrained bunny.obj --source 0 --path 1234 --exact -o path.png
       gegnn query --pretrained paper bunny.obj --source 0 --exact -o compare.png
+      gegnn query --pretrained biharmonic bunny.obj --source 0 --exact -o compare.png
       gegnn query runs/a/best.safetensors bunny.obj --pairs pairs.csv -o distances.csv
 
     Distances are in the mesh's units. The PLY and PNG show the mesh the network ran on (with
@@ -223,11 +228,12 @@ def query(files, pretrained, source, pairs_csv, output, exact, path_to, prepare,
     except (MeshError, ValueError) as exc:
         raise click.ClickException(f"{mesh_path}: {exc}") from None
     src = int(net_pairs[0, 0])
+    kind = _model_config(model_spec, pretrained).distance
     exact_d = None
     if exact and source is not None:  # before the network: the exact solver runs in a forked child
         from .query import exact_field
         try:
-            exact_d = exact_field(qm.mesh, src)
+            exact_d = exact_field(qm.mesh, src, kind)
         except MeshError as exc:
             raise click.ClickException(f"{mesh_path}: --exact: {exc.reason}") from None
 
@@ -249,13 +255,13 @@ def query(files, pretrained, source, pairs_csv, output, exact, path_to, prepare,
     if note:
         click.echo(f"{name}: note: {note}")
     on, n_parts = source_part(qm.mesh, src)
-    # Other parts than the source's have no geodesic distance from it: NaN (grey in pictures).
+    # Other parts than the source's have no distance from it: NaN (grey in pictures).
     field = np.where(on, emb.field(src), np.nan)
-    click.echo(f"{name}: {len(qm.mesh.vertices)} vertices; distance from {source}: "
+    click.echo(f"{name}: {len(qm.mesh.vertices)} vertices; {kind} distance from {source}: "
                f"min {np.nanmin(field):.4g} max {np.nanmax(field):.4g}")
     if n_parts > 1:
         click.echo(f"{name}: {n_parts} separate parts; source {source} is on a part of {int(on.sum())} vertices; "
-                   "the other parts have no geodesic distance from it (NaN in .npy, grey in pictures, "
+                   f"the other parts have no {kind} distance from it (NaN in .npy, grey in pictures, "
                    "left out of the error)")
     title = f"{name}, source {source}"
     if exact_d is not None:
@@ -311,6 +317,17 @@ def _model_and_meshes(files, pretrained, many=False):
         if not Path(path).is_file():
             raise click.BadParameter(f"{path}: no such file", param_hint="[CHECKPOINT] MESH")
     return spec, list(meshes)
+
+
+def _model_config(spec, pretrained):
+    """The config of a model, from its file's metadata alone (no weights read, no torch thread started)."""
+    from .checkpoint import read_config
+    from .model import pretrained_file
+
+    if not pretrained:
+        return read_config(spec)
+    with pretrained_file(spec) as path:
+        return read_config(path)
 
 
 def _load_model(spec, pretrained, device):

@@ -27,6 +27,7 @@ __all__ = ["GeGnnConfig", "GeGnn", "DistanceDecoder", "LandmarkDecoder", "Spectr
 PRETRAINED = {
     "landmark": "gegnn-landmark-v1.safetensors",  # landmark-guided, the most accurate
     "paper": "gegnn-classic-v1.safetensors",      # the paper's model (no landmarks)
+    "biharmonic": "gegnn-biharmonic-v1.safetensors",  # biharmonic distances: spectral codes + Weyl tail
 }
 
 
@@ -62,6 +63,7 @@ class GeGnnConfig:
     # corrected by a SpectralDecoder that reads the embeddings (gegnn.spectral).
     spectral: int = 0
     spectral_embedding: bool = True           # the correction reads the embedding difference
+    distance: str = "geodesic"                # what the model was trained to predict: "geodesic" | "biharmonic"
 
     def __post_init__(self):
         object.__setattr__(self, "encoder_blocks", tuple(self.encoder_blocks))
@@ -76,6 +78,8 @@ class GeGnnConfig:
             raise ValueError(f"landmark_output must be 'ratio' or 'interval', got {self.landmark_output!r}")
         if self.landmarks < 0 or self.spectral < 0:
             raise ValueError(f"landmarks and spectral must be >= 0, got {self.landmarks} and {self.spectral}")
+        if self.distance not in ("geodesic", "biharmonic"):
+            raise ValueError(f"distance must be 'geodesic' or 'biharmonic', got {self.distance!r}")
         if self.landmarks and self.spectral:
             raise ValueError("a model reads landmark fields (geodesic) or spectral codes (biharmonic), not both")
 
@@ -249,15 +253,10 @@ class GeGnn(nn.Module):
         """A model shipped in the package (fp16 weights; docs/model-card.md has data and accuracy).
 
         Args:
-            name: a key of :data:`PRETRAINED`: ``"landmark"`` (the default: the most accurate) or
-                ``"paper"`` (the paper's model).
+            name: a key of :data:`PRETRAINED`: ``"landmark"`` (the default: the most accurate geodesic
+                model), ``"paper"`` (the paper's model) or ``"biharmonic"`` (biharmonic distances).
         """
-        from importlib.resources import as_file, files
-
-        name = name or next(iter(PRETRAINED))
-        if name not in PRETRAINED:
-            raise ValueError(f"no pretrained model {name!r}; shipped: {', '.join(PRETRAINED)}")
-        with as_file(files("gegnn") / "weights" / PRETRAINED[name]) as path:
+        with pretrained_file(name) as path:
             return cls.from_checkpoint(path, map_location)
 
     @classmethod
@@ -268,6 +267,16 @@ class GeGnn(nn.Module):
         model = cls(ckpt.config)
         model.load_state_dict(ckpt.model_state)  # fp16 weights are cast to the model's fp32
         return model.eval()
+
+
+def pretrained_file(name: str | None = None):
+    """A context giving the path of the shipped model ``name`` (default: the first of :data:`PRETRAINED`)."""
+    from importlib.resources import as_file, files
+
+    name = name or next(iter(PRETRAINED))
+    if name not in PRETRAINED:
+        raise ValueError(f"no pretrained model {name!r}; shipped: {', '.join(PRETRAINED)}")
+    return as_file(files("gegnn") / "weights" / PRETRAINED[name])
 
 
 def _validated(vertices, faces) -> tuple[np.ndarray, np.ndarray]:

@@ -75,26 +75,31 @@ def load_query_mesh(path, prepare: bool = False, target_vertices: int = 5000) ->
     return QueryMesh(str(path), len(to_clean), Mesh(vertices, prepared.faces), to_mesh, scale)
 
 
-def exact_field(mesh: Mesh, source: int) -> np.ndarray:
-    """Exact geodesic distances from ``source`` (NaN off its connected part); see :func:`exact_fields`."""
-    return exact_fields(mesh, np.array([source]))[0]
+def exact_field(mesh: Mesh, source: int, distance: str = "geodesic") -> np.ndarray:
+    """Exact distances from ``source`` (NaN off its connected part); see :func:`exact_fields`."""
+    return exact_fields(mesh, np.array([source]), distance)[0]
 
 
-def exact_fields(mesh: Mesh, sources: np.ndarray) -> np.ndarray:
-    """Exact geodesic distances (S, N) from each of ``sources`` (the default geodata backend, NaN off the
-    source's part), in a forked child: native code that crashes on some input then fails with a
-    MeshError instead of killing the caller."""
+def exact_fields(mesh: Mesh, sources: np.ndarray, distance: str = "geodesic") -> np.ndarray:
+    """Exact geodesic (the default geodata backend) or biharmonic (:mod:`geodata.biharmonic`) distances
+    (S, N) from each of ``sources``, NaN off the source's part, in a forked child: native code that
+    crashes on some input then fails with a MeshError instead of killing the caller."""
     from geodata.parallel import run_isolated
 
-    _, counts = edge_face_counts(mesh.faces)
-    if (counts > 2).any():
-        raise MeshError("exact", f"{int((counts > 2).sum())} non-manifold edges (exact geodesics need a "
-                                 "manifold mesh; --prepare makes one)")
-    d = run_isolated(_solve_all, mesh, [int(s) for s in sources])
+    if distance == "geodesic":
+        _, counts = edge_face_counts(mesh.faces)
+        if (counts > 2).any():
+            raise MeshError("exact", f"{int((counts > 2).sum())} non-manifold edges (exact geodesics need a "
+                                     "manifold mesh; --prepare makes one)")
+    d = run_isolated(_solve_all, mesh, [int(s) for s in sources], distance)
     return np.where(np.isfinite(d), d, np.nan)
 
 
-def _solve_all(mesh: Mesh, sources: list[int]) -> np.ndarray:
+def _solve_all(mesh: Mesh, sources: list[int], distance: str) -> np.ndarray:
+    if distance == "biharmonic":
+        from geodata.biharmonic import biharmonic_distances
+        return biharmonic_distances(mesh, np.asarray(sources))
+
     from geodata.geodesic import geodesic_solver
 
     solve = geodesic_solver(mesh)

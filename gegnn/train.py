@@ -449,10 +449,13 @@ def build_model(cfg: TrainConfig, model_config, resume, device, log=None):
         guide = {f.name: getattr(model_config, f.name) for f in dataclasses.fields(GeGnnConfig)
                  if f.name.startswith(DECODER_OPTIONS)} if own_decoder else {}
         model_config = dataclasses.replace(init.config, **guide)
-    model = GeGnn(model_config or GeGnnConfig())
+    if resume is None:  # the model says what it predicts
+        model_config = dataclasses.replace(model_config or GeGnnConfig(), distance=cfg.distance)
+    model = GeGnn(model_config)
     if cfg.init and resume is None:
         state = init.model_state
-        if model_config != init.config:  # another decoder: none of the old one's weights
+        if dataclasses.replace(model_config, distance=init.config.distance) != init.config:
+            # another decoder: none of the old one's weights
             state = {k: v for k, v in state.items() if not k.startswith("distance.")}
         fresh = load_matching(model, state)
         if fresh and log is not None:
