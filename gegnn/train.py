@@ -29,7 +29,7 @@ METRICS = ["epoch", "step", "lr", "train_mre", "val_mre", "seconds"]
 METRIC_EPS = 1e-3  # offset of the relative error's denominator, in normalized units
 # Options a resumed run takes from the command line ("landmark_cache": field_cache's name in older runs).
 RESUME_KEEPS = ("epochs", "device", "workers", "field_cache", "landmark_cache")
-DECODER_OPTIONS = ("decoder", "landmark", "spectral")  # GeGnnConfig fields of the decoder (name prefixes)
+DECODER_KINDS = ("decoder", "landmark", "spectral")  # GeGnnConfig fields that choose the decoder (name prefixes)
 WARMUP_LR = 1e-3  # decoder warm-up: a small MLP on fixed codes (the network's --lr is usually lower)
 WARMUP_BYTES = 2 << 30  # decoder warm-up: codes and pairs kept on the device, per rank
 MAX_AUTO_WORKERS = 8  # --workers auto on a GPU: one per spare CPU core, at most this many (docs/benchmarks.md)
@@ -446,8 +446,10 @@ def build_model(cfg: TrainConfig, model_config, resume, device, log=None):
         init = load_checkpoint(cfg.init)
         own_decoder = model_config is not None and (model_config.landmarks or model_config.spectral
                                                     or model_config.decoder != "mlp")
+        # The kind of decoder from the command line; its width, like the network, from the checkpoint.
         guide = {f.name: getattr(model_config, f.name) for f in dataclasses.fields(GeGnnConfig)
-                 if f.name.startswith(DECODER_OPTIONS)} if own_decoder else {}
+                 if f.name.startswith(DECODER_KINDS) and f.name not in ("decoder_hidden", "decoder_blocks")
+                 } if own_decoder else {}
         model_config = dataclasses.replace(init.config, **guide)
     if resume is None:  # the model says what it predicts
         model_config = dataclasses.replace(model_config or GeGnnConfig(), distance=cfg.distance)

@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # The shipped biharmonic GeGnn (gegnn/weights/gegnn-biharmonic-v1.safetensors; docs/model-card.md) and
 # its ablation, after pipelines/pretrained/data.sh:   bash pipelines/biharmonic/train.sh data/ runs/
-# On the 2-core development CPU. A killed run continues with the same command (--resume is in it).
+# On the 2-core development CPU, one thread each (the times in docs/model-card.md). A killed run continues with the same command (--resume is in it).
 set -euo pipefail
+export OMP_NUM_THREADS=1  # one thread per run: two runs at once on the 2 cores
 data=${1:?usage: train.sh DATA_DIR RUNS_DIR}
 runs=${2:?usage: train.sh DATA_DIR RUNS_DIR}
 
@@ -22,7 +23,8 @@ gegnn export "$runs/bih-s32/best.safetensors" gegnn/weights/gegnn-biharmonic-v1.
 
 # 2. Ablation: the correction without the embeddings (spectral features only), decoder warm-up alone.
 gegnn train "$data/train.zarr" --run "$runs/bih-s32-noembed" $common --init $landmark --spectral 32 \
-    --spectral-no-embedding --decoder-warmup 6000 --epochs 1 --lr 0 --warmup-epochs 0
+    --spectral-no-embedding --decoder-warmup 6000 --epochs 1 --lr 0 --warmup-epochs 0 \
+    --field-cache "$runs/bih-s32/fields.zarr"
 
 # 3. The pure learned model (no eigen-solve; the paper's claim): the paper model's network with the
 #    Euclidean decoder (a biharmonic distance is a Euclidean distance of an embedding), end to end.

@@ -44,3 +44,20 @@ def test_train_eval_query(tiny_store, tmp_path):
 def test_help_lists_commands():
     result = CliRunner().invoke(main, ["--help"])
     assert result.exit_code == 0 and {"train", "eval", "query"} <= set(result.output.split())
+
+
+def test_query_biharmonic_compares_with_the_exact_biharmonic_field(tmp_path):
+    from geodata.biharmonic import biharmonic_distances
+    from geodata.mesh import Mesh
+
+    v, f = ellipsoid()
+    trimesh.Trimesh(v * 3.0, f, process=False).export(tmp_path / "m.obj")
+    result = CliRunner().invoke(main, ["query", "--pretrained", "biharmonic", str(tmp_path / "m.obj"),
+                                       "--source", "5", "--exact", "-o", str(tmp_path / "field.npy")])
+    assert result.exit_code == 0, result.output
+    assert "biharmonic distance from 5" in result.output
+    mre = float(result.output.split("mean relative error vs exact: ")[1].split("%")[0])
+    exact = biharmonic_distances(Mesh(v * 3.0, f), [5])[0]
+    pred = np.load(tmp_path / "field.npy")
+    keep = np.arange(len(v)) != 5
+    assert abs(100 * np.mean(np.abs(pred - exact)[keep] / (exact[keep] + 3e-3)) - mre) < 0.01 and mre < 5

@@ -1,19 +1,21 @@
 """Landmark-guided GeGnn: the landmark fields, the bounds and the decoder's invariances, training and
 checkpoints."""
+import dataclasses
 import logging
 
 import gdist
+
 import numpy as np
 import pytest
 import torch
 import trimesh
 from gegnn_stores import ellipsoid, exact_pairs, flat_grid, overfit, small_config
 
-from gegnn import GeGnn
+from gegnn import GeGnn, GeGnnConfig
 from gegnn.checkpoint import load_checkpoint
 from gegnn.data import BatchDataset
-from gegnn.fields import FieldSpec
 from gegnn.decoders import LandmarkDecoder
+from gegnn.fields import FieldSpec
 from gegnn.landmarks import landmark_fields
 import gegnn.train as gtrain
 from gegnn.train import TrainConfig, relative_error, train
@@ -158,9 +160,11 @@ def test_init_from_paper_model_keeps_its_network(tiny_store, tmp_path):
     paper.save(tmp_path / "paper.safetensors")
     cfg = TrainConfig(store=tiny_store, run=str(tmp_path / "run"), epochs=1, batch_size=2, lr=0.0,
                       pairs_per_mesh=200, init=str(tmp_path / "paper.safetensors"))
-    train(cfg, small_config(landmarks=8))
+    # The command line's defaults (e.g. a 256-wide decoder from --channels) choose nothing but the kind of
+    # decoder: its width comes with the checkpoint.
+    train(cfg, dataclasses.replace(GeGnnConfig(), landmarks=8))
     got = load_checkpoint(tmp_path / "run" / "last.safetensors")
-    assert got.config.landmarks == 8
+    assert got.config == dataclasses.replace(paper.config, landmarks=8)
     for name, value in paper.state_dict().items():
         if not name.startswith("distance."):
             torch.testing.assert_close(got.model_state[name], value)

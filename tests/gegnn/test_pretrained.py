@@ -21,7 +21,7 @@ def test_weights_are_fp16_safetensors_under_16_mib(name):
 
 def test_default_is_the_landmark_model_and_names_are_checked():
     assert GeGnn.pretrained().config.landmarks > 0
-    with pytest.raises(ValueError, match="shipped: landmark, paper"):
+    with pytest.raises(ValueError, match="shipped: landmark, paper, biharmonic"):
         GeGnn.pretrained("nonexistent")
 
 
@@ -50,3 +50,29 @@ def test_distance_is_symmetric_with_zero_diagonal(model):
     a = emb.distance(np.arange(10), np.arange(10, 20))
     np.testing.assert_array_equal(a, emb.distance(np.arange(10, 20), np.arange(10)))
     assert (emb.distance(np.arange(10), np.arange(10)) == 0).all()
+
+
+def sphere_biharmonic(theta, terms=2000):
+    """Biharmonic distance on the unit sphere (eigenvalues l(l+1), multiplicity 2l + 1):
+    d^2 = sum_l (2l + 1) / (2 pi) (1 - P_l(cos theta)) / (l(l+1))^2."""
+    from scipy.special import eval_legendre
+
+    ls = np.arange(1, terms + 1)[:, None]
+    terms_ = (2 * ls + 1) / (2 * np.pi) * (1 - eval_legendre(ls, np.cos(theta)[None])) / (ls * (ls + 1.0)) ** 2
+    return np.sqrt(terms_.sum(axis=0))
+
+
+def test_biharmonic_model_on_the_sphere():
+    """The shipped biharmonic model against the sphere's closed-form biharmonic distance."""
+    m = trimesh.creation.icosphere(4)
+    v = np.asarray(m.vertices)
+    rng = np.random.default_rng(0)
+    i, j = rng.integers(0, len(v), (2, 20000))
+    keep = i != j
+    i, j = i[keep], j[keep]
+    exact = sphere_biharmonic(np.arccos(np.clip((v[i] * v[j]).sum(axis=1), -1, 1)))
+    model = GeGnn.pretrained("biharmonic")
+    assert model.config.distance == "biharmonic"
+    pred = model.embed(v * 3.0, m.faces).distance(i, j) / 3.0  # any units: scale in, scale out
+    mre = np.mean(np.abs(pred - exact) / exact)
+    assert mre < 0.02
