@@ -156,6 +156,8 @@ def main():
     ap.add_argument("--meshes", help="only these meshes (comma-separated ids; default: all)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--ablation", help="markdown table of benchmarks/ablation_landmarks.py to include")
+    ap.add_argument("--biharmonic", help="markdown table of benchmarks/bench_biharmonic_model.py --out FILE to "
+                                         "include")
     ap.add_argument("--triangle", help="markdown table of benchmarks/bench_applications.py --only triangle "
                                        "--triangle-md FILE to include")
     args = ap.parse_args()
@@ -203,6 +205,17 @@ HEADERS = ["GeGnn", "paper GeGnn", "landmark bound", "heat method", "Euclidean",
            "paper, damaged", "heat, damaged"]
 
 
+BIHARMONIC_INTRO = (
+    "`GeGnn.pretrained(\"biharmonic\")` (32 spectral modes, their Weyl-law tail and a learned correction; "
+    "[model card](model-card.md#gegnn-biharmonic-v1-biharmonic-distances-biharmonic)) against the exact "
+    "biharmonic distances of the same validation meshes (`geodata biharmonic data/val.zarr --pairs 200000`), "
+    "all stored pairs, same metric; the pure learned model (the paper's network with a Euclidean decoder, no "
+    "eigen-solve: `pipelines/biharmonic/train.sh`); the Weyl estimate alone; and the classical truncated "
+    "spectral sum over the first m modes, a lower bound, with the mean time of its eigen-solve. `exact (s)`: "
+    "the exact solver for the stored pairs (their ~40 sources x every vertex). Made by `python "
+    "benchmarks/bench_biharmonic_model.py data/val.zarr --pure runs/bih-pure/best.safetensors --out FILE`.")
+
+
 def cpu_description() -> str:
     """CPU model and whether it has AVX512-BF16 (bf16 matmuls ~3x fp32 there, emulated elsewhere)."""
     info = Path("/proc/cpuinfo").read_text() if Path("/proc/cpuinfo").exists() else ""
@@ -223,7 +236,8 @@ def write_report(path, args, rows, times, speedup, largest, grid_ids):
         f"python benchmarks/bench_results.py {args.store}"
         + (f" --checkpoint {args.checkpoint}" if args.checkpoint else "")
         + (f" --ablation {args.ablation}" if args.ablation else "")
-        + (f" --triangle {args.triangle}" if args.triangle else ""),
+        + (f" --triangle {args.triangle}" if args.triangle else "")
+        + (f" --biharmonic {args.biharmonic}" if args.biharmonic else ""),
         "```",
         "",
         f"with {ckpt} and the shipped paper model (`GeGnn.pretrained(\"paper\")`), on the validation store "
@@ -269,6 +283,8 @@ def write_report(path, args, rows, times, speedup, largest, grid_ids):
                   "d(p, q) > d(p, x) + d(x, q) by more than 1e-6 relative (`gegnn.statistics.triangle_violations`"
                   "; `python benchmarks/bench_applications.py data/val.zarr --only triangle --triangle-md FILE`).",
                   "", Path(args.triangle).read_text().strip()]
+    if args.biharmonic:
+        lines += ["", "## Biharmonic distances", "", BIHARMONIC_INTRO, "", Path(args.biharmonic).read_text().strip()]
     if grid_ids:
         lines += ["", "## Predicted vs exact", "",
                   "One stored source per mesh (red dot); the error panels' scale stops at 10%.", "",

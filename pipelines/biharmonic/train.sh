@@ -21,7 +21,8 @@ gegnn train "$data/train.zarr" --run "$runs/bih-s32" $common --init $landmark --
     --decoder-warmup 6000 --epochs 1 --lr 1e-4 --warmup-epochs 0.1
 gegnn export "$runs/bih-s32/best.safetensors" gegnn/weights/gegnn-biharmonic-v1.safetensors --dtype fp16
 
-# 2. Ablation: the correction without the embeddings (spectral features only), decoder warm-up alone.
+# 2. Ablation: the correction without the embeddings (spectral features only). Its number is the val_mre
+#    after the decoder warm-up in its train.log (the epoch at lr 0 changes nothing; stop it there).
 gegnn train "$data/train.zarr" --run "$runs/bih-s32-noembed" $common --init $landmark --spectral 32 \
     --spectral-no-embedding --decoder-warmup 6000 --epochs 1 --lr 0 --warmup-epochs 0 \
     --field-cache "$runs/bih-s32/fields.zarr"

@@ -70,7 +70,9 @@ def test_init_starts_from_weights(tiny_store, tmp_path):
     train(config(tiny_store, tmp_path / "a", epochs=1), small_config())
     rows = train(config(tiny_store, tmp_path / "b", epochs=1, init=str(tmp_path / "a" / "best.safetensors"),
                         distance="biharmonic"), small_config(channels=8))
-    assert load_checkpoint(tmp_path / "b" / "last.safetensors").config == small_config() and len(rows) == 1
+    # The network's config comes from the checkpoint; the distance trained on is recorded.
+    got = load_checkpoint(tmp_path / "b" / "last.safetensors").config
+    assert got == small_config(distance="biharmonic") and len(rows) == 1
 
 
 def test_separate_validation_store(tiny_store, one_mesh_store, tmp_path):
