@@ -228,7 +228,8 @@ def query(files, pretrained, source, pairs_csv, output, exact, path_to, prepare,
     except (MeshError, ValueError) as exc:
         raise click.ClickException(f"{mesh_path}: {exc}") from None
     src = int(net_pairs[0, 0])
-    kind = _model_config(model_spec, pretrained).distance
+    config = _model_config(model_spec, pretrained)
+    kind = config.distance
     exact_d = None
     if exact and source is not None:  # before the network: the exact solver runs in a forked child
         from .query import exact_field
@@ -251,7 +252,7 @@ def query(files, pretrained, source, pairs_csv, output, exact, path_to, prepare,
     from .query import resolution_note, source_part
 
     name = Path(mesh_path).name
-    note = None if prepare else resolution_note(len(qm.mesh.vertices))
+    note = None if prepare else resolution_note(len(qm.mesh.vertices), config)
     if note:
         click.echo(f"{name}: note: {note}")
     on, n_parts = source_part(qm.mesh, src)

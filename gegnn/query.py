@@ -106,17 +106,22 @@ def _solve_all(mesh: Mesh, sources: list[int], distance: str) -> np.ndarray:
     return np.stack([solve(s) for s in sources])
 
 
-TRAINED_VERTICES = (1000, 30000)  # outside this range a mesh is far from the training meshes' ~5k
+# Vertex counts over which a model's accuracy was measured (docs/applications.md, "Scalability and
+# convergence": the landmark model at 1.0-1.2% on validation meshes of 5k-80k vertices and 0.5-0.7% on
+# spheres of 1k-100k; the paper model drifts, 9.8% at 5k to 11.3% at 80k and 16% on a 1k sphere; the
+# biharmonic model was measured at ~5k only).
+MEASURED_VERTICES = {"landmark": (1000, 100_000), "paper": (2000, 20_000), "biharmonic": (4000, 6000)}
 
 
-def resolution_note(n_vertices: int) -> str | None:
-    """A word for meshes much coarser or finer than the ~5k-vertex meshes the models were trained on."""
-    low, high = TRAINED_VERTICES
+def resolution_note(n_vertices: int, config) -> str | None:
+    """A word for a mesh outside the vertex counts where the model's accuracy was measured."""
+    kind = "biharmonic" if config.spectral else "landmark" if config.landmarks else "paper"
+    low, high = MEASURED_VERTICES[kind]
     if low <= n_vertices <= high:
         return None
-    return (f"{n_vertices} vertices, far {'fewer' if n_vertices < low else 'more'} than the ~5k of the meshes "
-            "the model was trained on: expect a larger error; --prepare remeshes to ~5k first (results are "
-            "carried back to this file's vertices)")
+    return (f"{n_vertices} vertices, {'fewer' if n_vertices < low else 'more'} than the {low:,}-{high:,} over which "
+            f"this model's accuracy was measured (docs/applications.md); --prepare remeshes to ~5k first "
+            "(results are carried back to this file's vertices)")
 
 
 def source_part(mesh: Mesh, source: int) -> tuple[np.ndarray, int]:

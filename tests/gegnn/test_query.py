@@ -143,5 +143,15 @@ def test_coarse_mesh_gets_a_resolution_note(ckpt, tmp_path):
     path = tmp_path / "box.obj"
     trimesh.creation.box().export(path)
     result = CliRunner().invoke(main, ["query", ckpt, str(path), "--source", "0"])
-    assert result.exit_code == 0 and "note: 8 vertices, far fewer than the ~5k" in result.output
+    assert result.exit_code == 0 and "note: 8 vertices, fewer than the 2,000-20,000 over which" in result.output
     assert "--prepare remeshes" in result.output
+
+
+def test_resolution_note_follows_the_measurements():
+    """The landmark model was measured at 1k-100k vertices without loss (docs/applications.md): no note at 80k;
+    the paper model drifts, so it gets one there."""
+    from gegnn.query import resolution_note
+
+    assert resolution_note(80_000, GeGnn.pretrained().config) is None
+    assert "more than the 2,000-20,000" in resolution_note(80_000, GeGnn.pretrained("paper").config)
+    assert "fewer than the 1,000-100,000" in resolution_note(500, GeGnn.pretrained().config)
