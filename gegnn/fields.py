@@ -5,7 +5,7 @@ network runs: landmark distance fields (geodesic, :mod:`gegnn.landmarks`) or tru
 A landmark-guided model trains on one of a few landmark draws per (epoch, mesh) (an augmentation). The
 heat-method fields of one draw cost ~0.29 s at K = 128 on a 5k-vertex mesh (one CPU thread), twice
 what the rest of a batch of four meshes costs to build, and each is needed many times; spectral codes
-(one draw: they have no random choice) cost about as much. Kept per loader worker, each worker would
+(one draw: they involve no random choice) cost ~0.1 s at m = 32. Kept per loader worker, each worker would
 recompute what the others had and hold ~10 MB per mesh in its own memory.
 
 Here they are computed before the first step, every rank its share with local processes, into a zarr

@@ -16,10 +16,9 @@ from geodata.mesh import Mesh, unique_edges, vertex_normals
 from geodata.stages.normalize import normalization
 
 from .decoders import DistanceDecoder, LandmarkDecoder, SpectralDecoder
+from .fields import FieldSpec
 from .graph import Graph, directed_edges
-from .landmarks import landmark_fields
 from .nn import GeoConv, GeoPool, GeoUnpool, Hierarchy, ResBlocks, build_hierarchy
-from .spectral import spectral_codes
 
 __all__ = ["GeGnnConfig", "GeGnn", "DistanceDecoder", "LandmarkDecoder", "SpectralDecoder"]
 
@@ -228,12 +227,8 @@ class GeGnn(nn.Module):
         scale = scale or 1.0  # a single point: keep units
         mesh = Mesh((vertices - center) / scale, faces)
         graph = self.mesh_graph(mesh.vertices, vertex_normals(mesh).astype(np.float32), unique_edges(mesh.faces))
-        fields = None
-        if self.config.landmarks:
-            fields = torch.as_tensor(landmark_fields(mesh.vertices, mesh.faces, self.config.landmarks).distances,
-                                     device=device)
-        elif self.config.spectral:
-            fields = torch.as_tensor(spectral_codes(mesh.vertices, mesh.faces, self.config.spectral), device=device)
+        spec = FieldSpec.of(self.config)
+        fields = None if spec is None else torch.as_tensor(spec.compute(mesh.vertices, mesh.faces), device=device)
         return self.hierarchy(graph).to(device), fields, scale
 
     def finetune(self, vertices: np.ndarray, faces: np.ndarray, **options):
