@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from geodata.mesh import Mesh, vertex_components
+from geodata.mesh import Mesh, label_groups, vertex_components
 
 __all__ = ["LandmarkFields", "landmark_fields", "T_COEF"]
 
@@ -74,8 +74,8 @@ def landmark_fields(vertices, faces, k: int, seed: int = 0, t_coef: float = T_CO
     landmarks = np.zeros((n_comp, k), dtype=np.int64)
     # Vertices and faces grouped by component once (stable: each group keeps the mesh's order), so a
     # mesh of many parts costs O(N + F), not O((N + F) x parts).
-    vertex_groups = _groups(labels, n_comp)
-    face_groups = _groups(labels[mesh.faces[:, 0]], n_comp)
+    vertex_groups = label_groups(labels, n_comp)
+    face_groups = label_groups(labels[mesh.faces[:, 0]], n_comp)
     local = np.empty(mesh.n_vertices, dtype=np.int64)  # index within the vertex's own component
     for c in range(n_comp):
         idx = vertex_groups[c]
@@ -91,12 +91,6 @@ def landmark_fields(vertices, faces, k: int, seed: int = 0, t_coef: float = T_CO
         out[idx] = fields[:, cols]
         landmarks[c] = idx[np.asarray(chosen)[cols]]
     return LandmarkFields(out, landmarks, labels)
-
-
-def _groups(labels: np.ndarray, n: int) -> list[np.ndarray]:
-    """Indices of each label 0..n-1, ascending."""
-    order = np.argsort(labels, kind="stable")
-    return np.split(order, np.searchsorted(labels[order], np.arange(1, n)))
 
 
 def _farthest_point_fields(solver, n: int, k: int, first: int) -> tuple[list[int], np.ndarray]:

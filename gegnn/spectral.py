@@ -52,22 +52,21 @@ def spectral_codes(vertices: np.ndarray, faces: np.ndarray, modes: int) -> np.nd
     """
     import scipy.sparse as sp
 
-    from geodata.biharmonic import _operators
-    from geodata.mesh import Mesh, MeshError, vertex_components
+    from geodata.biharmonic import cotan_operators
+    from geodata.mesh import Mesh, MeshError, label_groups, vertex_components
 
     if modes < 1:
         raise ValueError(f"modes must be >= 1, got {modes}")
     mesh = Mesh(np.asarray(vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64))
     try:
-        L, mass = _operators(mesh)
+        L, mass = cotan_operators(mesh)
     except MeshError as exc:
         raise ValueError(f"no biharmonic distance on this mesh: {exc.reason}") from None
     stiffness = (-L).tocsr()
     stiffness = (stiffness + stiffness.T) * 0.5
     labels = vertex_components(mesh)
     out = np.zeros((mesh.n_vertices, modes + 1), dtype=np.float32)
-    for c in range(int(labels.max()) + 1):
-        idx = np.flatnonzero(labels == c)
+    for idx in label_groups(labels, int(labels.max()) + 1):
         lam, phi = _eigenpairs(stiffness[idx][:, idx].tocsc(), sp.diags(mass[idx]).tocsc(), modes + 2)
         lam, phi = lam[1:], phi[:, 1:]  # the constant mode carries no distance
         kept = min(modes, len(lam))
@@ -81,10 +80,12 @@ def _eigenpairs(stiffness, mass, count: int) -> tuple[np.ndarray, np.ndarray]:
     """The ``count`` smallest eigenpairs (ascending, M-orthonormal) of ``stiffness phi = lambda mass phi``.
 
     Shift-invert Lanczos on the symmetric form: with S = stiffness + sigma M (positive definite for
-    sigma > 0, factored once as L D L^T with a fill-reducing order, as in :mod:`geodata.biharmonic`),
+    sigma > 0, factored once by :func:`geodata.biharmonic.ldlt`),
     the largest eigenvalues mu of M^1/2 S^-1 M^1/2 are 1 / (lambda + sigma), and psi = M^1/2 phi."""
     import scipy.linalg
     import scipy.sparse.linalg as spla
+
+    from geodata.biharmonic import ldlt
 
     n = stiffness.shape[0]
     if count >= n - 1:  # small component: dense, all of them
@@ -94,8 +95,7 @@ def _eigenpairs(stiffness, mass, count: int) -> tuple[np.ndarray, np.ndarray]:
     # Small against the first non-zero eigenvalue (~8 pi / area on a sphere), large enough for a
     # well-conditioned factorization.
     sigma = 0.1 / float(m.sum())
-    lu = spla.splu((stiffness + sigma * mass).tocsc(), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
-                   options=dict(SymmetricMode=True))
+    lu = ldlt((stiffness + sigma * mass).tocsc())
     root = np.sqrt(m)
     op = spla.LinearOperator((n, n), matvec=lambda x: root * lu.solve(root * x.ravel()), dtype=np.float64)
     mu, psi = spla.eigsh(op, k=count, which="LM", tol=1e-8)

@@ -35,15 +35,15 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from geodata.geodesic import sample_sources
-from geodata.mesh import Mesh, MeshError, vertex_components
+from geodata.mesh import Mesh, MeshError, label_groups, vertex_components
 
-__all__ = ["biharmonic_distances", "biharmonic_pairs", "BiharmonicSolver"]
+__all__ = ["biharmonic_distances", "biharmonic_pairs", "BiharmonicSolver", "cotan_operators", "ldlt"]
 
 STAGE = "biharmonic"
 _BLOCK = 32               # right-hand sides per sparse solve (measured best on 5k meshes)
 
 
-def _operators(mesh: Mesh) -> tuple[sp.csc_matrix, np.ndarray]:
+def cotan_operators(mesh: Mesh) -> tuple[sp.csc_matrix, np.ndarray]:
     """Cotangent Laplacian (libigl) and Voronoi masses; MeshError on anything that is not usable."""
     import igl
 
@@ -75,6 +75,12 @@ def _operators(mesh: Mesh) -> tuple[sp.csc_matrix, np.ndarray]:
     return L, m
 
 
+def ldlt(matrix: sp.csc_matrix):
+    """SuperLU in symmetric mode (minimum degree on A + A^T, no pivoting): the L D L^T of a symmetric
+    positive definite sparse matrix, with ``solve``; RuntimeError where it cannot factor."""
+    return spla.splu(matrix, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options=dict(SymmetricMode=True))
+
+
 class _Component:
     """One connected component: its vertices, masses and the L D L^T of -L with one vertex pinned."""
 
@@ -89,8 +95,7 @@ class _Component:
         Lc = neg_L[verts][:, verts][:k, :k].tocsc()
         Lc = ((Lc + Lc.T) * 0.5).tocsc()
         try:
-            lu = spla.splu(Lc, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
-                           options=dict(SymmetricMode=True))
+            lu = ldlt(Lc)
         except RuntimeError as exc:
             raise MeshError(STAGE, f"Laplacian cannot be factorized ({exc})") from None
         d = lu.U.diagonal()
@@ -125,18 +130,15 @@ class BiharmonicSolver:
     """Factors the cotangent Laplacian once per component; then distances from any sources."""
 
     def __init__(self, mesh: Mesh):
-        L, m = _operators(mesh)
+        L, m = cotan_operators(mesh)
         n = mesh.n_vertices
         self.n = n
         self.labels = vertex_components(mesh)
         self.n_components = int(self.labels.max()) + 1
-        order = np.argsort(self.labels, kind="stable")
-        bounds = np.searchsorted(self.labels[order], np.arange(self.n_components + 1))
         self.local = np.empty(n, dtype=np.int64)    # global vertex -> index inside its component
         self.components = []
         neg_L = (-L).tocsr()
-        for c in range(self.n_components):
-            verts = order[bounds[c]:bounds[c + 1]]
+        for verts in label_groups(self.labels, self.n_components):
             self.local[verts] = np.arange(len(verts))
             self.components.append(_Component(neg_L, m, verts))
 
