@@ -59,6 +59,11 @@ class FieldSpec:
         return LANDMARK_DRAWS if self.kind == "landmark" else 1
 
     @property
+    def columns(self) -> int:
+        """Columns of one mesh's fields: K landmark distances, or m spectral codes and the tail scale."""
+        return self.size if self.kind == "landmark" else self.size + 1
+
+    @property
     def name(self) -> str:
         return f"k{self.size}" if self.kind == "landmark" else f"spectral{self.size}"
 

@@ -83,11 +83,6 @@ class GeGnnConfig:
             raise ValueError("a model reads landmark fields (geodesic) or spectral codes (biharmonic), not both")
 
     @property
-    def fields(self) -> int:
-        """Columns of the per-vertex fields the decoder reads besides the embedding (0: none)."""
-        return self.landmarks or (self.spectral + 1 if self.spectral else 0)
-
-    @property
     def levels(self) -> int:
         return len(self.encoder_blocks)
 
@@ -160,16 +155,13 @@ class GeGnn(nn.Module):
         """The vertex codes from the U-Net's output features ``trunk`` (N, channels): the head, and with
         landmarks the landmark fields and positions appended (see ``forward``)."""
         z = self.head(trunk)
-        width = self.config.fields
-        if width:
-            if fields is None or fields.shape != (len(z), width):
-                raise ValueError(f"this model ({self._fields_name()}) needs fields of shape ({len(z)}, {width})")
+        spec = FieldSpec.of(self.config)
+        if spec is not None:
+            if fields is None or fields.shape != (len(z), spec.columns):
+                raise ValueError(f"a model with {spec.kind} fields ({spec.name}) needs fields of shape "
+                                 f"({len(z)}, {spec.columns})")
             z = type(self.distance).codes(z, fields, h.graphs[0].pos)
         return z
-
-    def _fields_name(self) -> str:
-        c = self.config
-        return f"landmarks={c.landmarks}" if c.landmarks else f"spectral={c.spectral}"
 
     def _unet(self, h: Hierarchy) -> Tensor:
         g = h.graphs[0]

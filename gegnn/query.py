@@ -15,6 +15,7 @@ import numpy as np
 
 from geodata.mesh import Mesh, MeshError, edge_face_counts, vertex_components
 
+from .fields import FieldSpec
 from .train import METRIC_EPS
 
 __all__ = ["QueryMesh", "load_query_mesh", "exact_field", "exact_fields", "relative_errors", "read_pairs",
@@ -110,13 +111,14 @@ def _solve_all(mesh: Mesh, sources: list[int], distance: str) -> np.ndarray:
 # convergence": the landmark model at 1.0-1.2% on validation meshes of 5k-80k vertices and 0.5-0.7% on
 # spheres of 1k-100k; the paper model drifts, 9.8% at 5k to 11.3% at 80k and 16% on a 1k sphere; the
 # biharmonic model was measured at ~5k only).
-MEASURED_VERTICES = {"landmark": (1000, 100_000), "paper": (2000, 20_000), "biharmonic": (4000, 6000)}
+MEASURED_VERTICES = {"landmark": (1000, 100_000), "paper": (2000, 20_000), "spectral": (4000, 6000)}
 
 
 def resolution_note(n_vertices: int, config) -> str | None:
-    """A word for a mesh outside the vertex counts where the model's accuracy was measured."""
-    kind = "biharmonic" if config.spectral else "landmark" if config.landmarks else "paper"
-    low, high = MEASURED_VERTICES[kind]
+    """A word for a mesh outside the vertex counts where the model's accuracy was measured (by the
+    fields the model reads: landmark, spectral, or none for the paper model)."""
+    spec = FieldSpec.of(config)
+    low, high = MEASURED_VERTICES[spec.kind if spec else "paper"]
     if low <= n_vertices <= high:
         return None
     return (f"{n_vertices} vertices, {'fewer' if n_vertices < low else 'more'} than the {low:,}-{high:,} over which "
