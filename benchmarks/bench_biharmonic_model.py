@@ -25,7 +25,8 @@ from geodata.biharmonic import biharmonic_distances
 from geodata.mesh import Mesh
 from gegnn import GeGnn
 from gegnn.data import GeodesicStore
-from gegnn.spectral import spectral_codes, weyl_shape, weyl_table
+from gegnn.decoders import SpectralDecoder
+from gegnn.spectral import spectral_codes
 from gegnn.train import METRIC_EPS
 
 from bench_results import cpu_description, timed  # benchmarks/ is on sys.path when a script there runs
@@ -35,15 +36,15 @@ def mre(pred, exact) -> float:
     return float(np.mean(np.abs(pred - exact) / (exact + METRIC_EPS)))
 
 
+@torch.no_grad()
 def weyl_estimate(codes, v, pairs, m):
-    """d_m and the Weyl-tail estimate for ``pairs`` from spectral codes (N, m + 1)."""
-    i, j = pairs[:, 0], pairs[:, 1]
-    dm2 = ((codes[i, :m] - codes[j, :m]) ** 2).sum(1)
-    tau = codes[i, m]
-    r = np.linalg.norm(v[i] - v[j], axis=1)
-    shape = weyl_shape(torch.as_tensor(r / np.sqrt(2 * np.pi * np.maximum(tau, 1e-30)), dtype=torch.float32),
-                       weyl_table()).numpy()
-    return np.sqrt(dm2), np.sqrt(dm2 + tau * shape)
+    """d_m and the Weyl-tail estimate for ``pairs`` from spectral codes (N, m + 1): a fresh
+    SpectralDecoder without embeddings, whose correction starts at zero."""
+    decoder = SpectralDecoder(0, m, 1, embedding=False)
+    z = SpectralDecoder.codes(torch.empty(len(v), 0), torch.as_tensor(codes), torch.as_tensor(v))
+    a, b = z[torch.as_tensor(pairs[:, 0])], z[torch.as_tensor(pairs[:, 1])]
+    _, (bound, _) = decoder.inputs(a, b)
+    return bound.sqrt().numpy(), decoder(a, b).numpy()
 
 
 def main():
