@@ -2,7 +2,8 @@ r"""Pair decoders: per-vertex codes of two vertices to their distance.
 
 Every decoder splits into ``inputs`` (the symmetric pair features and what the output needs) and
 ``output`` (the MLP's value to a distance), so :class:`gegnn.embedding.Embedding` can run the MLP in its
-own fast path between the two.
+own fast path between the two; ``pair_inputs`` is ``inputs`` of pairs of rows of a code table (fused into
+one pass for the landmark decoder on a CPU).
 """
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ from torch import Tensor, nn
 
 from .spectral import weyl_shape, weyl_table
 
-__all__ = ["DistanceDecoder", "LandmarkDecoder", "SpectralDecoder", "MLP", "mlp"]
+__all__ = ["PairDecoder", "DistanceDecoder", "LandmarkDecoder", "SpectralDecoder", "MLP", "mlp"]
 
 MAX_LOG_RATIO = 5.0  # a ratio decoder never predicts more than e^5 = 148 times the lower bound
 
@@ -43,7 +44,20 @@ def mlp(n_in: int, hidden: int) -> MLP:
     return MLP(nn.Linear(n_in, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, 1))
 
 
-class DistanceDecoder(nn.Module):
+class PairDecoder(nn.Module):
+    """What every decoder shares: :meth:`pair_inputs`."""
+
+    def pair_inputs(self, codes: Tensor, i: Tensor, j: Tensor):
+        """``inputs(codes[i], codes[j])`` (index_select, not codes[i]: advanced indexing is a generic
+        scatter-gather, 6x slower for rows)."""
+        return self.inputs(codes.index_select(0, i), codes.index_select(0, j))
+
+    def pair_width(self, codes: Tensor) -> int:
+        """Values one pair holds in flight in :meth:`pair_inputs` (sets the chunk of a decode)."""
+        return 2 * codes.shape[1]
+
+
+class DistanceDecoder(PairDecoder):
     r"""Distance between two embeddings (the paper's decoder).
 
     ``"mlp"``: :math:`d_{ij} = |\mathrm{MLP}((\mathbf{e}_i - \mathbf{e}_j)^2)|`, symmetric by
@@ -73,7 +87,7 @@ class DistanceDecoder(nn.Module):
         return self.output(self.mlp(x), extra)
 
 
-class LandmarkDecoder(nn.Module):
+class LandmarkDecoder(PairDecoder):
     r"""Distance from embeddings and landmark distance fields (landmark-guided GeGnn).
 
     With :math:`f_{ik}` the distance of vertex :math:`i` to landmark :math:`k` of its component and
@@ -149,6 +163,29 @@ class LandmarkDecoder(nn.Module):
             parts.insert(0, (ea - eb).square())
         return torch.cat(parts, dim=1), (lower, upper)
 
+    def pair_inputs(self, codes: Tensor, i: Tensor, j: Tensor):
+        """:meth:`inputs` of the pairs (codes[i], codes[j]); on a CPU, in fp32 and without gradients, in one
+        fused pass over each pair's codes (``src/pair_features.cpp``: no (pairs x K) intermediates; the same
+        values to within float rounding)."""
+        if not self._fused(codes):
+            return super().pair_inputs(codes, i, j)
+        from ._pair_features import landmark_features
+
+        n = len(i)
+        x = torch.empty(n, self.mlp[0].in_features)
+        lower, upper = torch.empty(n), torch.empty(n)
+        landmark_features(codes.detach().contiguous(), i.contiguous(), j.contiguous(), self.embed_dim, self.k,
+                          self.embedding, self.euclidean, x, lower, upper, torch.get_num_threads())
+        return x, (lower, upper)
+
+    def pair_width(self, codes: Tensor) -> int:
+        return self.mlp[0].in_features if self._fused(codes) else super().pair_width(codes)
+
+    @staticmethod
+    def _fused(codes: Tensor) -> bool:
+        return codes.device.type == "cpu" and codes.dtype == torch.float32 and not (
+            torch.is_grad_enabled() and codes.requires_grad)
+
     def output(self, t: Tensor, extra: tuple[Tensor, Tensor]) -> Tensor:
         lower, upper = extra
         t = t.squeeze(1).float()
@@ -163,7 +200,7 @@ class LandmarkDecoder(nn.Module):
         return self.output(self.mlp(x), extra)
 
 
-class SpectralDecoder(nn.Module):
+class SpectralDecoder(PairDecoder):
     r"""Biharmonic distance from truncated spectral codes, their Weyl-law tail and the embeddings
     (biharmonic GeGnn; :mod:`gegnn.spectral` derives the tail).
 

@@ -7,8 +7,8 @@ from torch import Tensor
 
 __all__ = ["Embedding"]
 
-CHUNK_VALUES = 1 << 19  # code values per side of one decoded chunk on a CPU: intermediates stay in cache
-ACCELERATOR_CHUNK_VALUES = 1 << 26  # ... on a GPU: few launches (256 MB of fp32 codes per side)
+CHUNK_VALUES = 1 << 20  # values a decoded chunk holds in flight on a CPU: intermediates stay in cache
+ACCELERATOR_CHUNK_VALUES = 1 << 27  # ... on a GPU: few launches (512 MB of fp32 codes)
 
 
 def _bf16_is_fast(device: torch.device) -> bool:
@@ -31,11 +31,12 @@ class Embedding:
         scale: factor from normalized units to the input's units.
         precision: ``"auto"`` (bf16 decoder where bf16 matmuls are fast, else fp32), ``"bf16"`` or
             ``"fp32"``. bf16 changes distances by ~0.3% relative (median), well below the model's error.
-        chunk: pairs decoded per batch. On a CPU about 512k code values per side (8192 pairs of 64-d
-            embeddings, 2674 of a landmark model's 196-d codes): large enough for the matmul kernels,
-            small enough that intermediates stay in cache (K = 128: 0.33 s per 1M queries against
-            0.41 s with 8192). On a GPU 64M values per side (342k pairs of 196-d codes): 1M queries in
-            3 chunks, where the CPU's size would launch ~20k kernels.
+        chunk: pairs decoded per batch. On a CPU about 1M values in flight (the decoder's
+            ``pair_width`` a pair: 8192 pairs of two 64-d embeddings, 14768 pairs of the landmark
+            decoder's 71 fused inputs): large enough for the matmul kernels, small enough that
+            intermediates stay in cache (landmark model, 1M queries: 0.25 s against 0.31 s with 7384
+            and 0.27 s with 16384). On a GPU 128M values (342k pairs of 196-d codes): 1M queries in 3
+            chunks, where the CPU's size would launch thousands of kernels.
         vertices, faces: the embedded mesh in its own units (:meth:`gegnn.GeGnn.embed` passes them):
             needed by the geometric queries, :meth:`path` and :meth:`log_map`.
     """
@@ -48,7 +49,7 @@ class Embedding:
         self._topology = None
         self.decoder, self.scale = decoder, float(scale)
         values = CHUNK_VALUES if self.features.device.type == "cpu" else ACCELERATOR_CHUNK_VALUES
-        self.chunk = chunk or max(1024, values // self.features.shape[1])
+        self.chunk = chunk or max(1024, values // decoder.pair_width(self.features))
         if precision == "auto":
             precision = "bf16" if _bf16_is_fast(self.features.device) else "fp32"
         self.dtype = {"bf16": torch.bfloat16, "fp32": torch.float32}[precision]
@@ -78,11 +79,63 @@ class Embedding:
         out = torch.empty(len(i), dtype=torch.float32, device=self.features.device)
         with torch.inference_mode():
             for s in range(0, len(i), self.chunk):
-                out[s:s + self.chunk] = self._decode(i[s:s + self.chunk], j[s:s + self.chunk])
+                out[s:s + self.chunk] = self._decode(self.features, i[s:s + self.chunk], j[s:s + self.chunk])
             # The decoder of a zero difference is not exactly 0; a distance is. masked_fill, unlike
             # out[i == j] = 0, needs no count of the mask, so no host sync.
             out = out.masked_fill_(i == j, 0).mul_(self.scale).reshape(shape)
         return out if as_tensor else out.cpu().numpy()
+
+    def matrix(self, rows=None, cols=None, dtype=np.float32, out=None, tile: int = 2048,
+               progress: bool = False):
+        """Distances of every row vertex to every column vertex, (len(rows), len(cols)).
+
+        Computed tile by tile (``tile`` x ``tile`` pairs at a time), so memory stays bounded whatever
+        the size, and written into ``out`` when given: any array that takes slice assignment, e.g. a
+        ``numpy.lib.format.open_memmap`` or a chunked zarr array, for matrices larger than memory (a
+        50k-vertex mesh has 2.5e9 entries). When the columns are the rows (the default: all x all), only
+        the tiles on and above the diagonal are decoded and mirrored: the matrix is exactly symmetric,
+        and 0 on the diagonal (as :meth:`distance`, whose values every entry equals).
+
+        Args:
+            rows, cols: vertex indices (default: every vertex; ``cols`` defaults to ``rows``).
+            dtype: of the result; float16 halves the size (relative rounding 5e-4, far below the
+                model's error) and raises if a distance exceeds its range (65504).
+            out: where to write (shape (len(rows), len(cols))); default a new NumPy array.
+            tile: rows and columns per tile.
+            progress: show a progress bar.
+
+        Returns:
+            ``out``, filled.
+        """
+        from tqdm.auto import tqdm
+
+        rows = np.arange(self.num_vertices) if rows is None else np.asarray(rows, dtype=np.int64).reshape(-1)
+        symmetric = cols is None or np.array_equal(rows, cols)
+        cols = rows if cols is None else np.asarray(cols, dtype=np.int64).reshape(-1)
+        dtype = np.dtype(dtype)
+        shape = (len(rows), len(cols))
+        if out is None:
+            out = np.empty(shape, dtype=dtype)
+        elif tuple(out.shape) != shape:
+            raise ValueError(f"out has shape {tuple(out.shape)}, the matrix {shape}")
+        row_starts, col_starts = range(0, shape[0], tile), range(0, shape[1], tile)
+        tiles = [(r, c) for r in row_starts for c in col_starts if not symmetric or c >= r]
+        with tqdm(total=sum(min(tile, shape[0] - r) * min(tile, shape[1] - c) for r, c in tiles), unit="pair",
+                  unit_scale=True, disable=not progress, desc="distance matrix") as bar:
+            for r, c in tiles:
+                i, j = rows[r:r + tile], cols[c:c + tile]
+                block = self.distance(i[:, None], j[None, :])
+                if symmetric and r == c:  # mirror the upper triangle: exactly symmetric
+                    block = np.triu(block) + np.triu(block, 1).T
+                if block.size and block.max() > np.finfo(dtype).max:
+                    raise ValueError(f"a distance exceeds the range of {dtype} ({np.finfo(dtype).max:g}): "
+                                     "use float32, or scale the mesh down")
+                block = block.astype(dtype)
+                out[r:r + len(i), c:c + len(j)] = block
+                if symmetric and r != c:
+                    out[c:c + len(j), r:r + len(i)] = block.T
+                bar.update(block.size)
+        return out
 
     def _indices(self, x) -> Tensor:
         if torch.is_tensor(x):
@@ -131,10 +184,11 @@ class Embedding:
         return [(m.weight.detach().t().to(self.dtype).contiguous(), m.bias.detach().to(self.dtype))
                 for m in linears]
 
-    def _decode(self, i: Tensor, j: Tensor) -> Tensor:
+    def _decode(self, codes: Tensor, i: Tensor, j: Tensor) -> Tensor:
+        """Distances of the pairs (codes[i], codes[j]) (normalized units, diagonal not zeroed)."""
         if self._layers is None:  # Euclidean decoder: no MLP, fp32 is cheap
-            return (self.features[i] - self.features[j]).norm(dim=1)
-        x, extra = self.decoder.inputs(self.features[i], self.features[j])
+            return (codes.index_select(0, i) - codes.index_select(0, j)).norm(dim=1)
+        x, extra = self.decoder.pair_inputs(codes, i, j)
         x = x.to(self.dtype)
         *hidden, (w_out, b_out) = self._layers
         for w, b in hidden:  # fused bias add, in-place ReLU: fewer passes over memory

@@ -54,14 +54,14 @@ class GeoConv(nn.Module):
         weight = torch.cat([self.lin_self.weight, self.lin_neighbor.weight])
         bias = torch.cat([self.lin_self.bias, self.lin_self.bias.new_zeros(self.out_channels)])
         own, neighbor = F.linear(x, weight, bias).split(self.out_channels, dim=1)
-        msg = neighbor[j]
+        msg = neighbor.index_select(0, j)  # not neighbor[j]: advanced indexing is ~6x slower for rows
         geometry = self.edge_geometry(pos, i, j)
         if geometry is not None:  # fused multiply-add: one pass over the (E, C) messages
             msg = torch.addmm(msg, geometry.to(msg.dtype), self.lin_geometry.weight.t().to(msg.dtype))
         return own + aggregate(msg, i, x.shape[0], self.aggr)
 
     def edge_geometry(self, pos: Tensor, i: Tensor, j: Tensor) -> Tensor | None:
-        rel = pos[i] - pos[j]
+        rel = pos.index_select(0, i) - pos.index_select(0, j)
         parts = ([rel] if self.relative_position else []) + \
                 ([rel.norm(dim=1, keepdim=True)] if self.edge_length else [])
         return torch.cat(parts, dim=1) if parts else None
