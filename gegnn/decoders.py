@@ -56,6 +56,11 @@ class PairDecoder(nn.Module):
         """Values one pair holds in flight in :meth:`pair_inputs` (sets the chunk of a decode)."""
         return 2 * codes.shape[1]
 
+    def point_codes(self, corners: Tensor, bary: Tensor) -> Tensor:
+        r"""Codes (P, C) of points inside faces from their corners' codes (P, 3, C) and barycentric
+        coordinates (P, 3): the blend :math:`\sum_k b_k c_k` of every column."""
+        return torch.einsum("pk,pkc->pc", bary, corners)
+
 
 class DistanceDecoder(PairDecoder):
     r"""Distance between two embeddings (the paper's decoder).
@@ -180,6 +185,14 @@ class LandmarkDecoder(PairDecoder):
 
     def pair_width(self, codes: Tensor) -> int:
         return self.mlp[0].in_features if self._fused(codes) else super().pair_width(codes)
+
+    def point_codes(self, corners: Tensor, bary: Tensor) -> Tensor:
+        """The blend of the corners' codes, except the distance to the nearest landmark, which is that of
+        the blended fields (the minimum of linear functions is not linear)."""
+        codes = super().point_codes(corners, bary)
+        d, k = self.embed_dim, self.k
+        codes[:, d + k] = codes[:, d:d + k].amin(dim=1)
+        return codes
 
     @staticmethod
     def _fused(codes: Tensor) -> bool:

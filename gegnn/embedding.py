@@ -76,14 +76,71 @@ class Embedding:
             if lo < 0 or hi >= self.num_vertices:
                 raise IndexError(f"vertex index out of range: {lo if lo < 0 else hi} "
                                  f"(the mesh has {self.num_vertices} vertices)")
-        out = torch.empty(len(i), dtype=torch.float32, device=self.features.device)
+        # The decoder of a zero difference is not exactly 0; a distance is. masked_fill, unlike
+        # out[i == j] = 0, needs no count of the mask, so no host sync.
+        out = self._decode_all(self.features, i, j).masked_fill_(i == j, 0).reshape(shape)
+        return out if as_tensor else out.cpu().numpy()
+
+    def surface_distance(self, face_a, bary_a, face_b, bary_b) -> np.ndarray:
+        """Distances between points anywhere on the surface, each given by a face and its barycentric
+        coordinates (the weights of the corners ``faces[face]``; :meth:`locate` finds them for xyz points).
+
+        ``face_a`` (...) with ``bary_a`` (..., 3) and ``face_b`` with ``bary_b`` broadcast against each
+        other as :meth:`distance`'s indices do (``face_a[:, None]``, ``face_b[None, :]``: all pairs).
+        A point's code is the barycentric blend of its face's vertex codes (the decoder's
+        ``point_codes``: landmark fields and spectral modes are piecewise linear, as the solvers that
+        made them define them between vertices), so a point at a vertex gets that vertex's distances
+        and the distance is continuous across edges; points at the same place are at distance 0.
+        """
+        (codes_a, pos_a, shape_a), (codes_b, pos_b, shape_b) = (
+            self._point_codes(face_a, bary_a), self._point_codes(face_b, bary_b))
+        i = torch.arange(len(codes_a), device=codes_a.device).reshape(shape_a)
+        j = torch.arange(len(codes_a), len(codes_a) + len(codes_b), device=codes_a.device).reshape(shape_b)
+        i, j = torch.broadcast_tensors(i, j)
+        shape, i, j = i.shape, i.reshape(-1), j.reshape(-1)
+        positions = torch.cat([pos_a, pos_b])
+        same = (positions[i] - positions[j]).abs().amax(dim=1) <= 1e-12 * self.scale
+        out = self._decode_all(torch.cat([codes_a, codes_b]), i, j).masked_fill_(same, 0)
+        return out.reshape(shape).cpu().numpy()
+
+    def locate(self, points):
+        """The closest surface point of each xyz point (P, 3) (in the mesh's units), as
+        :class:`geodata.surface_points.SurfacePoints` ``(face, bary, offset)``: the input of
+        :meth:`surface_distance`, and how far each point was from the surface."""
+        from geodata.mesh import Mesh
+        from geodata.surface_points import locate_points
+        self._require_mesh()
+        return locate_points(Mesh(self.vertices, self.faces), points)
+
+    def _point_codes(self, face, bary) -> tuple[Tensor, Tensor, tuple]:
+        """Codes (P, C) and positions (P, 3) of surface points, and the shape their faces came in."""
+        self._require_mesh()
+        face, bary = np.asarray(face), np.asarray(bary, dtype=np.float64)
+        if bary.shape[-1:] != (3,) or bary.shape[:-1] != face.shape or not np.issubdtype(face.dtype, np.integer):
+            raise ValueError(f"need integer faces (...) and barycentric coordinates (..., 3); got {face.shape} "
+                             f"{face.dtype} and {bary.shape}")
+        flat_face, flat_bary = face.reshape(-1), bary.reshape(-1, 3)
+        bad = np.flatnonzero((flat_face < 0) | (flat_face >= len(self.faces)))
+        if len(bad):
+            raise IndexError(f"face index out of range: {flat_face[bad[0]]} (the mesh has {len(self.faces)} faces)")
+        bad = np.flatnonzero((flat_bary < -1e-6).any(axis=1) | (np.abs(flat_bary.sum(axis=1) - 1) > 1e-6))
+        if len(bad):
+            raise ValueError(f"barycentric coordinates {flat_bary[bad[0]].tolist()} are not >= 0 summing to 1")
+        corners = self.faces[flat_face]
+        device = self.features.device
+        weights = torch.as_tensor(flat_bary, dtype=torch.float32, device=device)
+        with torch.inference_mode():
+            codes = self.decoder.point_codes(self.features[torch.as_tensor(corners, device=device)], weights)
+        positions = np.einsum("pk,pkd->pd", flat_bary, self.vertices[corners])
+        return codes, torch.as_tensor(positions, device=device), face.shape
+
+    def _decode_all(self, codes: Tensor, i: Tensor, j: Tensor) -> Tensor:
+        """Distances in the mesh's units of the pairs (codes[i], codes[j]), chunk by chunk."""
+        out = torch.empty(len(i), dtype=torch.float32, device=codes.device)
         with torch.inference_mode():
             for s in range(0, len(i), self.chunk):
-                out[s:s + self.chunk] = self._decode(self.features, i[s:s + self.chunk], j[s:s + self.chunk])
-            # The decoder of a zero difference is not exactly 0; a distance is. masked_fill, unlike
-            # out[i == j] = 0, needs no count of the mask, so no host sync.
-            out = out.masked_fill_(i == j, 0).mul_(self.scale).reshape(shape)
-        return out if as_tensor else out.cpu().numpy()
+                out[s:s + self.chunk] = self._decode(codes, i[s:s + self.chunk], j[s:s + self.chunk])
+            return out.mul_(self.scale)
 
     def matrix(self, rows=None, cols=None, dtype=np.float32, out=None, tile: int = 2048,
                progress: bool = False):
@@ -170,12 +227,15 @@ class Embedding:
     @property
     def topology(self):
         """Adjacency of the embedded mesh (built on first use)."""
-        if self.vertices is None or self.faces is None:
-            raise ValueError("this Embedding has no mesh: make it with GeGnn.embed, or pass vertices and faces")
+        self._require_mesh()
         if self._topology is None:
             from .paths import SurfaceTopology
             self._topology = SurfaceTopology(self.vertices, self.faces)
         return self._topology
+
+    def _require_mesh(self):
+        if self.vertices is None or self.faces is None:
+            raise ValueError("this Embedding has no mesh: make it with GeGnn.embed, or pass vertices and faces")
 
     def _decoder_layers(self):
         if self.decoder.mlp is None:

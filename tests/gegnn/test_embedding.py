@@ -87,3 +87,101 @@ def test_matrix_blocks_rows_cols_and_out(landmark_embedding, tmp_path):
     tiny = Embedding(emb.features, emb.decoder, scale=1e6, precision="fp32")
     with pytest.raises(ValueError, match="float16"):
         tiny.matrix(rows, cols, dtype=np.float16)
+
+
+def grid(n=40):
+    x, y = np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n), indexing="ij")
+    v = np.stack([x.ravel(), y.ravel(), np.zeros(n * n)], 1)
+    idx = np.arange(n * n).reshape(n, n)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
+    return v, np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+
+
+def random_points(f, count, rng):
+    return rng.integers(0, len(f), count), rng.dirichlet([1, 1, 1], count)
+
+
+def at(v, f, face, bary):
+    return np.einsum("pk,pkd->pd", bary, v[f[face]])
+
+
+def test_surface_points_blend_exactly_where_the_codes_are_positions():
+    from gegnn.decoders import DistanceDecoder
+
+    v, f = grid()
+    emb = Embedding(torch.as_tensor(v, dtype=torch.float32), DistanceDecoder(3, 0, "euclidean"), precision="fp32",
+                    vertices=v, faces=f)
+    rng = np.random.default_rng(0)
+    (fa, ba), (fb, bb) = random_points(f, 50, rng), random_points(f, 70, rng)
+    d = emb.surface_distance(fa[:, None], ba[:, None], fb[None], bb[None])  # all pairs: (50, 70)
+    straight = np.linalg.norm(at(v, f, fa, ba)[:, None] - at(v, f, fb, bb)[None], axis=2)
+    np.testing.assert_allclose(d, straight, rtol=1e-5, atol=1e-6)
+    corner = (f[fa[:5]] == f[fa[:5], 1:2]).astype(float)  # a face's second corner is that vertex
+    np.testing.assert_allclose(emb.surface_distance(fa[:5], corner, fa[:5, None], corner[:, None]),
+                               emb.distance(f[fa[:5], 1], f[fa[:5], 1:2]), atol=0)
+    with pytest.raises(ValueError, match="barycentric"):
+        emb.surface_distance(fa[:1], [[0.5, 0.6, 0.1]], fb[:1], bb[:1])
+    with pytest.raises(IndexError, match="faces"):
+        emb.surface_distance([len(f)], [[1, 0, 0]], fb[:1], bb[:1])
+
+
+def test_locate_finds_the_face_and_the_offset():
+    v, f = grid()
+    emb = Embedding(torch.as_tensor(v, dtype=torch.float32), LandmarkDecoder(0, 1, 4, embedding=False),
+                    vertices=v, faces=f)
+    rng = np.random.default_rng(1)
+    face, bary = random_points(f, 200, rng)
+    lift = rng.uniform(-0.2, 0.2, 200)
+    got = emb.locate(at(v, f, face, bary) + lift[:, None] * [0, 0, 1])
+    np.testing.assert_allclose(at(v, f, got.face, got.bary), at(v, f, face, bary), atol=1e-12)
+    np.testing.assert_allclose(got.offset, np.abs(lift), atol=1e-12)
+
+
+@pytest.fixture(scope="module")
+def shipped():
+    return GeGnn.pretrained()
+
+
+def test_shipped_model_between_surface_points_on_a_plane_is_the_straight_line(shipped):
+    v, f = grid()
+    emb = shipped.embed(v, f)
+    rng = np.random.default_rng(2)
+    (fa, ba), (fb, bb) = random_points(f, 400, rng), random_points(f, 400, rng)
+    straight = np.linalg.norm(at(v, f, fa, ba) - at(v, f, fb, bb), axis=1)
+    surface = np.mean(np.abs(emb.surface_distance(fa, ba, fb, bb) - straight) / (straight + 1e-3))
+    i, j = rng.integers(0, len(v), 400), rng.integers(0, len(v), 400)
+    line = np.linalg.norm(v[i] - v[j], axis=1)
+    between_vertices = np.mean(np.abs(emb.distance(i, j) - line) / (line + 1e-3))
+    assert surface < 0.01 and surface < 1.3 * between_vertices  # measured: 0.42% and 0.44%
+
+
+def test_shipped_model_between_surface_points_against_inserted_vertices(shipped):
+    from pathlib import Path
+
+    from geodata.geodesic import geodesic_solver
+    from geodata.mesh import Mesh
+    from geodata.stages.load import load_mesh_file
+    from geodata.surface_points import insert_points
+
+    path = Path(__file__).resolve().parents[3] / "shared/meshes/dev/odedstein-meshes/skull_low_resolution.obj"
+    if not path.exists():
+        pytest.skip(f"{path} not found (the shared meshes sit beside the checkout)")
+    mesh = load_mesh_file(path)[0]
+    v, f = mesh.vertices, mesh.faces
+    emb = shipped.embed(v, f)
+    rng = np.random.default_rng(3)
+    face = rng.choice(len(f), 200, replace=False)
+    bary = rng.dirichlet([2, 2, 2], 200)
+    refined, vertex = insert_points(Mesh(v, f), face, bary)
+    solve, sources = geodesic_solver(refined), range(8)
+    exact = np.stack([solve(int(vertex[s]))[vertex] for s in sources])
+    pred = emb.surface_distance(face[list(sources), None], bary[list(sources), None], face[None], bary[None])
+    off = exact > 0
+    surface = np.mean(np.abs(pred - exact)[off] / (exact[off] + 1e-3 * emb.scale))
+    corners = f[face, 0]  # the same sources and targets moved to a vertex of their face
+    solve = geodesic_solver(Mesh(v, f))
+    exact_v = np.stack([solve(int(corners[s]))[corners] for s in sources])
+    pred_v = emb.distance(corners[list(sources), None], corners[None])
+    off = exact_v > 0
+    between_vertices = np.mean(np.abs(pred_v - exact_v)[off] / (exact_v[off] + 1e-3 * emb.scale))
+    assert surface < 0.03 and surface < 1.3 * between_vertices, (surface, between_vertices)
