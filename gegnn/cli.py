@@ -28,6 +28,8 @@ def main():
       gegnn query runs/a/best.safetensors mesh.obj --source 0 -o field.ply
       gegnn query --pretrained mesh.obj --source 0 --exact -o field.png
       gegnn query --pretrained mesh.obj --source 0 --path 99 -o path.png
+      gegnn query --pretrained mesh.obj --points points.csv -o distances.npy
+      gegnn pairwise --pretrained mesh.obj -o D.npy
       gegnn finetune --pretrained mesh.obj -o tuned.safetensors
       gegnn texture --pretrained mesh.obj --center 0 -o textured.png
       gegnn shape-distribution --pretrained a.obj b.obj -o d2.png
@@ -177,9 +179,13 @@ def evaluate(checkpoint, store, distance, device, csv_path):
 @click.option("--source", type=int, help="Source vertex index (the file's own numbering).")
 @click.option("--pairs", "pairs_csv", type=click.Path(exists=True, dir_okay=False),
               help="Answer the pairs of this CSV (two integer columns i,j; a header is allowed).")
+@click.option("--points", "points_file", type=click.Path(exists=True, dir_okay=False),
+              help="Distances between points anywhere on the surface: xyz in a .npy array (P, 3) or a CSV x,y,z "
+                   "(a header is allowed), in the mesh's units; each is moved to the closest surface point.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False),
               help="With --source: field.npy (per file vertex), field.ply (colored mesh) or field.png "
-                   "(rendered). With --pairs: a CSV i,j,distance (default: stdout).")
+                   "(rendered). With --pairs: a CSV i,j,distance (default: stdout). With --points: the "
+                   "(P, P) matrix as .npy or .csv (default: stdout).")
 @click.option("--exact", is_flag=True, help="Also compute the exact field (geodata's exact solver of the distance "
                                             "the model predicts: geodesic or biharmonic) and report the error; a "
                                             "PNG shows predicted | exact | relative error.")
@@ -191,7 +197,7 @@ def evaluate(checkpoint, store, distance, device, csv_path):
 @click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True)
 @click.option("--precision", type=click.Choice(["fp32", "bf16"]), default="fp32", show_default=True,
               help="Network precision (bf16: faster on recent CPUs and GPUs).")
-def query(files, pretrained, source, pairs_csv, output, exact, path_to, prepare, device, precision):
+def query(files, pretrained, source, pairs_csv, points_file, output, exact, path_to, prepare, device, precision):
     """Distances on MESH (OBJ/OFF/PLY/STL/GLB, any units) predicted by CHECKPOINT or --pretrained: geodesic,
     or biharmonic with a biharmonic model (--pretrained biharmonic).
 
@@ -203,6 +209,7 @@ def query(files, pretrained, source, pairs_csv, output, exact, path_to, prepare,
       gegnn query --pretrained paper bunny.obj --source 0 --exact -o compare.png
       gegnn query --pretrained biharmonic bunny.obj --source 0 --exact -o compare.png
       gegnn query runs/a/best.safetensors bunny.obj --pairs pairs.csv -o distances.csv
+      gegnn query --pretrained bunny.obj --points clicks.csv --exact -o distances.npy
 
     Distances are in the mesh's units. The PLY and PNG show the mesh the network ran on (with
     --prepare, the remeshed one); .npy and CSV outputs use the file's vertex numbering.
@@ -214,12 +221,16 @@ def query(files, pretrained, source, pairs_csv, output, exact, path_to, prepare,
     from .query import read_pairs
 
     model_spec, (mesh_path,) = _model_and_meshes(files, pretrained)
-    if (source is None) == (pairs_csv is None):
-        raise click.UsageError("give one of --source or --pairs")
+    if sum(x is not None for x in (source, pairs_csv, points_file)) != 1:
+        raise click.UsageError("give one of --source, --pairs or --points")
     if exact and pairs_csv:
-        raise click.UsageError("--exact goes with --source (it compares whole fields)")
+        raise click.UsageError("--exact goes with --source or --points (it compares whole fields)")
     if path_to is not None and source is None:
         raise click.UsageError("--path goes with --source (the path runs from the source)")
+    if points_file:
+        _output_suffix(output, (".npy", ".csv"))
+        return _query_points(model_spec, pretrained, mesh_path, points_file, output, exact, prepare, device,
+                             precision)
     suffix = _output_suffix(output, (".csv",) if pairs_csv else (".npy", ".ply", ".png"))
     qm = _load_mesh(mesh_path, prepare)
     try:
@@ -297,6 +308,142 @@ def query(files, pretrained, source, pairs_csv, output, exact, path_to, prepare,
                        Panel(np.where(np.isnan(err) & on, 0.0, err), "relative error", "magma",
                              "|pred - exact| / exact", 0, 0.1, isolines=0)]
         save_panels(output, [Row(qm.mesh.vertices, qm.mesh.faces, src, panels, lines)], suptitle=title)
+    if output:
+        click.echo(f"written {output}")
+
+
+@main.command(context_settings={"max_content_width": 100})
+@click.argument("files", **MODEL_ARG)
+@click.option("--pretrained", is_flag=True, help=PRETRAINED_HELP)
+@click.option("-o", "--output", required=True, type=click.Path(),
+              help="D.npy (NumPy) or D.zarr (a chunked zarr array): written tile by tile as computed, so it may "
+                   "be far larger than memory; it appears under its name when complete (NAME.partial until then).")
+@click.option("--rows", "rows_file", type=click.Path(exists=True, dir_okay=False),
+              help="Only these rows: vertex indices (the file's numbering) in a .npy array or a text file of one "
+                   "per line. Columns are always every vertex.")
+@click.option("--dtype", type=click.Choice(["float32", "float16"]), default="float32", show_default=True,
+              help="float16 halves the file (relative rounding 5e-4; refuses distances over 65504).")
+@click.option("--exact", is_flag=True, help="The exact solver's matrix of the model's distance instead (geodesic: "
+                                            "window propagation on every core; biharmonic: geodata.biharmonic).")
+@click.option("--heat", is_flag=True, help="The heat method's matrix instead (potpourri3d, one field per row).")
+@click.option("--jobs", default=0, show_default=True, help="Threads of --exact (0: every core).")
+@click.option("--prepare", is_flag=True, help="Run the geodata pipeline first (watertight, remesh to ~5k "
+                                              "vertices); rows and columns stay the file's vertices.")
+@click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True)
+@click.option("--precision", type=click.Choice(["fp32", "bf16"]), default="fp32", show_default=True,
+              help="Network and decoder precision (bf16: faster on recent CPUs and GPUs).")
+def pairwise(files, pretrained, output, rows_file, dtype, exact, heat, jobs, prepare, device, precision):
+    """The whole distance matrix of MESH: every vertex (or --rows) to every vertex, predicted by
+    CHECKPOINT or --pretrained, or for comparison computed by the exact solver (--exact) or the heat
+    method (--heat).
+
+    \b
+    Examples:
+      gegnn pairwise --pretrained bunny.obj -o D.npy
+      gegnn pairwise --pretrained bunny.obj -o D.zarr --dtype float16
+      gegnn pairwise --pretrained bunny.obj --rows sources.txt -o D.npy
+      gegnn pairwise --pretrained bunny.obj --exact -o E.npy
+
+    Distances are in the mesh's units; entry (r, c) is the distance from row vertex r to vertex c, in
+    the file's numbering. NaN where there is no distance: a vertex used by no face, or two separate
+    parts. The model's matrix is exactly symmetric and 0 on the diagonal.
+    """
+    import time
+
+    import numpy as np
+
+    from geodata.mesh import MeshError
+
+    from .pairwise import FileMatrix, MatrixFile, exact_rows, heat_rows
+    from .query import read_indices
+
+    model_spec, (mesh_path,) = _model_and_meshes(files, pretrained)
+    if exact and heat:
+        raise click.UsageError("give at most one of --exact and --heat")
+    if Path(output).suffix.lower() not in (".npy", ".zarr"):
+        raise click.BadParameter("expected a .npy or .zarr path", param_hint="-o")
+    qm = _load_mesh(mesh_path, prepare)
+    everything = np.arange(qm.n_file_vertices)
+    name = Path(mesh_path).name
+    try:
+        rows = everything if rows_file is None else read_indices(rows_file)
+    except ValueError as exc:
+        raise click.ClickException(str(exc)) from None
+    bad = (rows < 0) | (rows >= qm.n_file_vertices)
+    if bad.any():
+        raise click.ClickException(f"{rows_file}: vertex {rows[bad][0]} out of range: {name} has "
+                                   f"{qm.n_file_vertices} vertices")
+    config = _model_config(model_spec, pretrained)
+    kind = config.distance
+    if heat and kind != "geodesic":
+        raise click.UsageError(f"--heat computes geodesic distances; this model predicts {kind} distances")
+    Path(output).parent.mkdir(parents=True, exist_ok=True)
+    out = MatrixFile(output, (len(rows), len(everything)), dtype)
+    matrix = FileMatrix(out, qm.mesh, qm.to_mesh, rows, everything)
+    start = time.perf_counter()
+    try:
+        if exact:
+            what = f"exact {kind}"
+            exact_rows(qm.mesh, matrix.mesh_rows, matrix.mesh_cols, matrix, kind, jobs or None, progress=True)
+        elif heat:
+            what = "heat-method geodesic"
+            heat_rows(qm.mesh, matrix.mesh_rows, matrix.mesh_cols, matrix, progress=True)
+        else:
+            what = f"predicted {kind}"
+            emb = _load_model(model_spec, pretrained, device).embed(qm.mesh.vertices, qm.mesh.faces,
+                                                                    precision=precision)
+            emb.matrix(matrix.mesh_rows, None if rows_file is None else matrix.mesh_cols, dtype=dtype,
+                       out=matrix, progress=True)
+    except (MeshError, ValueError) as exc:
+        raise click.ClickException(f"{name}: {exc}") from None
+    out.close()
+    seconds = time.perf_counter() - start
+    size = out.shape[0] * out.shape[1] * np.dtype(dtype).itemsize
+    click.echo(f"{name}: {out.shape[0]} x {out.shape[1]} {what} distances ({dtype}, {size / 2**20:.1f} MiB) in "
+               f"{seconds:.1f} s, written to {output}")
+
+
+def _query_points(model_spec, pretrained, mesh_path, points_file, output, exact, prepare, device, precision):
+    """``gegnn query --points``: the (P, P) matrix between surface points, optionally against exact distances
+    between the same points inserted as vertices."""
+    import numpy as np
+
+    from geodata.mesh import MeshError
+    from geodata.surface_points import insert_points, locate_points
+
+    from .query import exact_fields, read_points, relative_errors
+
+    qm = _load_mesh(mesh_path, prepare)
+    name = Path(mesh_path).name
+    try:
+        points = read_points(points_file)
+    except (OSError, ValueError) as exc:
+        raise click.ClickException(str(exc)) from None
+    located = locate_points(qm.mesh, points)
+    click.echo(f"{name}: {len(points)} points, at most {located.offset.max():.3g} from the surface (each moved to "
+               "the closest surface point)")
+    kind = _model_config(model_spec, pretrained).distance
+    exact_d = None
+    if exact:  # before the network: the exact solver runs in a forked child
+        refined, vertex = insert_points(qm.mesh, located.face, located.bary)
+        try:
+            exact_d = exact_fields(refined, vertex, kind)[:, vertex]
+        except MeshError as exc:
+            raise click.ClickException(f"{name}: --exact: {exc.reason}") from None
+    emb = _load_model(model_spec, pretrained, device).embed(qm.mesh.vertices, qm.mesh.faces, precision=precision)
+    d = emb.surface_distance(located.face[:, None], located.bary[:, None], located.face[None], located.bary[None])
+    if exact_d is not None:
+        errors = np.concatenate([relative_errors(d[p], exact_d[p], qm.scale, p) for p in range(len(d))])
+        click.echo(f"mean relative error vs exact (points inserted as vertices): {100 * np.nanmean(errors):.2f}% "
+                   f"(median {100 * np.nanmedian(errors):.2f}%, max {100 * np.nanmax(errors):.1f}%)")
+    if output and output.lower().endswith(".npy"):
+        np.save(output, d)
+    else:
+        text = "\n".join(",".join(f"{x:.6g}" for x in row) for row in d.tolist()) + "\n"
+        if output:
+            Path(output).write_text(text)
+        else:
+            click.echo(text, nl=False)
     if output:
         click.echo(f"written {output}")
 

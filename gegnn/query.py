@@ -19,7 +19,7 @@ from .fields import FieldSpec
 from .train import METRIC_EPS
 
 __all__ = ["QueryMesh", "load_query_mesh", "exact_field", "exact_fields", "relative_errors", "read_pairs",
-           "source_part", "largest_part", "resolution_note"]
+           "source_part", "largest_part", "resolution_note", "read_indices", "read_points"]
 
 
 
@@ -144,6 +144,48 @@ def relative_errors(pred: np.ndarray, exact: np.ndarray, scale: float, source: i
     err = np.abs(pred - exact) / (exact + METRIC_EPS * scale)
     err[source] = np.nan
     return err
+
+
+def read_indices(path) -> np.ndarray:
+    """Vertex indices (R,) int64 from a .npy array or a text/CSV file of one integer per line (a header
+    line is allowed)."""
+    if str(path).endswith(".npy"):
+        values = np.load(path, allow_pickle=False)
+        if not np.issubdtype(values.dtype, np.integer) or values.ndim != 1:
+            raise ValueError(f"{path}: expected a 1-D array of integer vertex indices, got {values.dtype} "
+                             f"{values.shape}")
+        return values.astype(np.int64)
+    lines = [line for line in Path(path).read_text().splitlines() if line.strip()]
+    header = bool(lines) and not lines[0].split(",")[0].strip().lstrip("-").isdigit()
+    try:
+        return np.loadtxt(lines[header:], delimiter=",", dtype=np.int64, usecols=0, ndmin=1)
+    except ValueError as exc:
+        raise ValueError(f"{path}: expected one integer vertex index per line ({exc})") from None
+
+
+def read_points(path) -> np.ndarray:
+    """xyz points (P, 3) float64 from a .npy array or a CSV file of three columns x,y,z (a header line is
+    allowed)."""
+    if str(path).endswith(".npy"):
+        points = np.load(path, allow_pickle=False)
+    else:
+        lines = [line for line in Path(path).read_text().splitlines() if line.strip()]
+        header = bool(lines) and not _is_number(lines[0].split(",")[0])
+        try:
+            points = np.loadtxt(lines[header:], delimiter=",", dtype=np.float64, usecols=(0, 1, 2), ndmin=2)
+        except ValueError as exc:
+            raise ValueError(f"{path}: expected three number columns x,y,z ({exc})") from None
+    if points.ndim != 2 or points.shape[1] != 3 or not len(points) or not np.isfinite(points).all():
+        raise ValueError(f"{path}: expected finite points of shape (P, 3), got {points.dtype} {points.shape}")
+    return np.asarray(points, dtype=np.float64)
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
 
 
 def read_pairs(path) -> np.ndarray:

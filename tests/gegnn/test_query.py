@@ -89,7 +89,7 @@ def test_clear_errors(soup, ckpt, tmp_path):
     r = runner.invoke(main, ["query", ckpt, str(bad), "--source", "0"])
     assert r.exit_code != 0 and "bad.obj: load: line 3: face refers to vertex 3; the file has 2 vertices" in r.output
     r = runner.invoke(main, ["query", ckpt, path])
-    assert r.exit_code != 0 and "--source or --pairs" in r.output
+    assert r.exit_code != 0 and "--source, --pairs or --points" in r.output
     r = runner.invoke(main, ["query", path, "--source", "0"])
     assert r.exit_code != 0 and "--pretrained [NAME] MESH" in r.output
     (tmp_path / "afile").write_text("")
@@ -155,3 +155,78 @@ def test_resolution_note_follows_the_measurements():
     assert resolution_note(80_000, GeGnn.pretrained().config) is None
     assert "more than the 2,000-20,000" in resolution_note(80_000, GeGnn.pretrained("paper").config)
     assert "fewer than the 1,000-100,000" in resolution_note(500, GeGnn.pretrained().config)
+
+
+def test_pairwise_matrix_in_file_numbering_exact_and_heat(soup, ckpt, tmp_path):
+    import zarr
+
+    path, n_mesh, n_file = soup
+    runner = CliRunner()
+    r = runner.invoke(main, ["pairwise", ckpt, path, "-o", str(tmp_path / "d.npy")])
+    assert r.exit_code == 0, r.output
+    assert f"{n_file} x {n_file} predicted geodesic distances" in r.output
+    d = np.load(tmp_path / "d.npy")
+    assert d.shape == (n_file, n_file) and np.array_equal(d, d.T) and not np.diag(d).any()
+    qm = load_query_mesh(path)
+    twins = np.flatnonzero(qm.to_mesh == qm.to_mesh[0])  # the soup's copies of one vertex
+    assert len(twins) > 1 and not d[np.ix_(twins, twins)].any()
+    pairs = tmp_path / "pairs.csv"
+    pairs.write_text("i,j\n0,5\n7,300\n")
+    runner.invoke(main, ["query", ckpt, path, "--pairs", str(pairs), "-o", str(tmp_path / "p.csv")])
+    answered = [float(line.split(",")[2]) for line in (tmp_path / "p.csv").read_text().splitlines()[1:]]
+    np.testing.assert_allclose([d[0, 5], d[7, 300]], answered, rtol=1e-5)
+
+    r = runner.invoke(main, ["pairwise", ckpt, path, "-o", str(tmp_path / "d.zarr"), "--dtype", "float16"])
+    assert r.exit_code == 0, r.output
+    np.testing.assert_allclose(zarr.open_array(tmp_path / "d.zarr", mode="r")[:], d, rtol=1e-3, atol=1e-3)
+    assert not list(tmp_path.glob("*.partial"))
+
+    rows = tmp_path / "rows.txt"
+    rows.write_text("3\n0\n")
+    r = runner.invoke(main, ["pairwise", ckpt, path, "--rows", str(rows), "--exact", "-o", str(tmp_path / "e.npy")])
+    assert r.exit_code == 0, r.output
+    e = np.load(tmp_path / "e.npy")
+    from gegnn.query import exact_field
+    np.testing.assert_allclose(e[1], qm.to_file(exact_field(qm.mesh, int(qm.to_mesh[0]))), rtol=1e-6)  # float32
+    assert np.array_equal(d[[3, 0]] == 0, e == 0)  # the same layout: 0 at the row vertex and its copies
+    r = runner.invoke(main, ["pairwise", ckpt, path, "--rows", str(rows), "--heat", "-o", str(tmp_path / "h.npy")])
+    assert r.exit_code == 0, r.output
+    h = np.load(tmp_path / "h.npy")
+    assert np.mean(np.abs(h - e)[e > 0] / e[e > 0]) < 0.05  # the heat method's error on a smooth ellipsoid
+
+    rows.write_text(f"0\n{n_file}\n")
+    r = runner.invoke(main, ["pairwise", ckpt, path, "--rows", str(rows), "-o", str(tmp_path / "x.npy")])
+    assert r.exit_code != 0 and f"vertex {n_file} out of range: soup.obj has {n_file} vertices" in r.output
+    r = runner.invoke(main, ["pairwise", ckpt, path, "--exact", "--heat", "-o", str(tmp_path / "x.npy")])
+    assert r.exit_code != 0 and "at most one of --exact and --heat" in r.output
+    r = runner.invoke(main, ["pairwise", ckpt, path, "-o", str(tmp_path / "x.csv")])
+    assert r.exit_code != 0 and ".npy or .zarr" in r.output
+
+
+def test_query_points_on_the_surface(soup, ckpt, tmp_path):
+    path, _, _ = soup
+    qm = load_query_mesh(path)
+    v, f = qm.mesh.vertices, qm.mesh.faces
+    inside = v[f[:5]].mean(axis=1)  # face centres
+    from geodata.mesh import vertex_normals
+    above = v[f[0, :1]] + 0.5 * vertex_normals(qm.mesh)[f[0, :1]]  # off the surface, closest to the vertex
+    points = np.concatenate([v[f[0, :1]], inside, above])
+    np.save(tmp_path / "pts.npy", points)
+    runner = CliRunner()
+    r = runner.invoke(main, ["query", ckpt, path, "--points", str(tmp_path / "pts.npy"), "--exact",
+                             "-o", str(tmp_path / "d.npy")])
+    assert r.exit_code == 0, r.output
+    assert "7 points, at most" in r.output and "mean relative error vs exact (points inserted as vertices)" in r.output
+    d = np.load(tmp_path / "d.npy")
+    assert d.shape == (7, 7) and not np.diag(d).any() and d[0, 6] == 0  # the off-surface copy lands on the vertex
+    np.testing.assert_allclose(d, d.T, rtol=1e-5)
+    (tmp_path / "pts.csv").write_text("x,y,z\n" + "\n".join(",".join(map(str, p)) for p in points[:3]))
+    r = runner.invoke(main, ["query", ckpt, path, "--points", str(tmp_path / "pts.csv")])
+    assert r.exit_code == 0, r.output
+    printed = np.array([[float(x) for x in line.split(",")] for line in r.output.splitlines()[1:]])
+    np.testing.assert_allclose(printed, d[:3, :3], rtol=1e-5)
+    (tmp_path / "bad.csv").write_text("1,2\n")
+    r = runner.invoke(main, ["query", ckpt, path, "--points", str(tmp_path / "bad.csv")])
+    assert r.exit_code != 0 and "bad.csv: expected three number columns x,y,z" in r.output
+    r = runner.invoke(main, ["query", ckpt, path, "--points", str(tmp_path / "pts.csv"), "--source", "0"])
+    assert r.exit_code != 0 and "one of --source, --pairs or --points" in r.output
