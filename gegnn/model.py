@@ -205,7 +205,7 @@ class GeGnn(nn.Module):
         was_training = self.training
         self.eval()
         autocast = torch.autocast(device.type, dtype=torch.bfloat16) if precision == "bf16" else nullcontext()
-        with autocast:
+        with autocast, torch.inference_mode():
             codes = self(h, fields=fields).float()
         self.train(was_training)
         return Embedding(codes, self.distance, scale, vertices=vertices, faces=faces)

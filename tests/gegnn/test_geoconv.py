@@ -38,6 +38,23 @@ def test_geoconv_matches_dense_reference(aggr, rel, length):
     torch.testing.assert_close(conv(x, POS.double(), EDGE_INDEX), expected)
 
 
+@pytest.mark.parametrize("rel,length", [(True, True), (False, True), (True, False), (False, False)])
+@pytest.mark.parametrize("channels", [6, 64])  # 6: below the kernel's 8 lanes; 64: whole vectors
+def test_fused_inference_max_matches_the_dense_reference(rel, length, channels):
+    torch.manual_seed(0)
+    conv = GeoConv(4, channels, relative_position=rel, edge_length=length)
+    x = torch.randn(5, 4)
+    order = torch.argsort(EDGE_INDEX[0], stable=True)  # gegnn's graphs list edges by receiver
+    with torch.inference_mode():  # fp32 on a CPU without gradients: src/geoconv.cpp
+        fused = conv(x, POS, EDGE_INDEX[:, order])
+        unsorted = conv(x, POS, EDGE_INDEX)  # not by receiver: the torch path
+        own = conv.lin_self(x[4])
+    torch.testing.assert_close(fused[4], own, rtol=1e-6, atol=1e-6)  # no edges: the max term is 0
+    expected = dense_reference(conv.double(), x.double(), POS.double(), EDGE_INDEX).float()
+    torch.testing.assert_close(fused, expected, rtol=1e-5, atol=1e-5)
+    torch.testing.assert_close(unsorted, expected, rtol=1e-5, atol=1e-5)
+
+
 def test_geoconv_translation_invariant():
     torch.manual_seed(0)
     conv = GeoConv(4, 8)
