@@ -9,7 +9,18 @@ their geodesic distance:
     \max_k |d(i, l_k) - d(j, l_k)| \;\le\; d(i, j) \;\le\; \min_k \, d(i, l_k) + d(l_k, j).
 
 Landmarks are chosen by geodesic farthest-point sampling, which costs nothing beyond the fields
-themselves: each new landmark is the vertex farthest from all fields computed so far.
+themselves: each new landmark is the vertex farthest from all fields computed so far (the lowest index
+among vertices within TIE of the farthest, so that symmetric meshes, where solver rounding alone tells
+equally far vertices apart, give the same landmarks on every solver).
+
+The fields are potpourri3d's robust heat method, computed by :mod:`gegnn.heat` (the same fields to
+solver rounding, ~1e-14 relative; on the 19 validation meshes the same landmarks and float32 fields bit
+for bit) on parts of at least HEAT_MIN_VERTICES vertices when at least HEAT_MIN_FIELDS fields are
+asked for, by potpourri3d's solver elsewhere (there its smaller setup wins). Sampling is sequential
+(field k picks landmark k + 1): one heat solve, gradient, divergence and Poisson solve a field. K = 128
+on the 5,224-vertex validation dragon, one core of a 2-core EPYC: 0.15-0.19 s (setup ~0.05 s, a field
+~0.65-0.9 ms), against 0.27-0.34 s (2.1-2.7 ms a field) with potpourri3d's solver in the same runs
+(benchmarks/bench_landmark_fields.py).
 """
 from __future__ import annotations
 
@@ -19,9 +30,14 @@ import numpy as np
 
 from geodata.mesh import Mesh, label_groups, vertex_components
 
+from .heat import HeatDistance
+
 __all__ = ["LandmarkFields", "landmark_fields", "T_COEF"]
 
 T_COEF = 0.5
+TIE = 1e-9  # farthest-point ties: relative to the largest distance
+HEAT_MIN_VERTICES = 500  # below, or for fewer fields, potpourri3d's own solver is faster (its setup is)
+HEAT_MIN_FIELDS = 32
 
 
 @dataclass
@@ -63,8 +79,6 @@ def landmark_fields(vertices, faces, k: int, seed: int = 0, t_coef: float = T_CO
     Returns:
         :class:`LandmarkFields`
     """
-    import potpourri3d as pp3d
-
     if k < 1:
         raise ValueError(f"k must be >= 1, got {k}")
     mesh = Mesh(vertices, faces)
@@ -85,32 +99,59 @@ def landmark_fields(vertices, faces, k: int, seed: int = 0, t_coef: float = T_CO
         if len(idx) < 3 or not len(sub_faces):
             landmarks[c] = idx[0]
             continue
-        solver = pp3d.MeshHeatMethodDistanceSolver(mesh.vertices[idx], sub_faces, t_coef=t_coef, use_robust=True)
-        chosen, fields = _farthest_point_fields(solver, len(idx), min(k, len(idx)), int(rng.integers(len(idx))))
+        n_fields = min(k, len(idx))
+        field = _heat_field(mesh.vertices[idx], sub_faces, t_coef, n_fields)
+        chosen, fields = _farthest_point_fields(field, len(idx), n_fields, int(rng.integers(len(idx))))
         cols = np.arange(k) % len(chosen)  # fewer vertices than K: repeat
         out[idx] = fields[:, cols]
         landmarks[c] = idx[np.asarray(chosen)[cols]]
     return LandmarkFields(out, landmarks, labels)
 
 
-def _farthest_point_fields(solver, n: int, k: int, first: int) -> tuple[list[int], np.ndarray]:
-    fields = np.empty((n, k), dtype=np.float32)
+def _heat_field(vertices, faces, t_coef: float, fields: int):
+    """``field(source) -> (N,)``: the distance field of one source vertex by potpourri3d's robust heat
+    method, computed by :class:`gegnn.heat.HeatDistance` (the same fields to solver rounding) where that
+    pays: its setup costs more than potpourri3d's (flips in Python), each field less (0.7 against 2.4 ms
+    at 5k vertices), so from HEAT_MIN_VERTICES vertices and HEAT_MIN_FIELDS fields. potpourri3d itself
+    on smaller parts and on meshes that HeatDistance does not cover (non-manifold edges, faces
+    repeating a vertex, non-finite coordinates)."""
+    if len(vertices) >= HEAT_MIN_VERTICES and fields >= HEAT_MIN_FIELDS:
+        try:
+            return HeatDistance(vertices, faces, t_coef).distance
+        except ValueError:
+            pass
+    import potpourri3d as pp3d
+
+    return pp3d.MeshHeatMethodDistanceSolver(vertices, faces, t_coef=t_coef, use_robust=True).compute_distance
+
+
+def _farthest_point_fields(field, n: int, k: int, first: int) -> tuple[list[int], np.ndarray]:
+    fields = np.empty((k, n), dtype=np.float32)  # a row a field: contiguous writes
     nearest = np.full(n, np.inf)
     chosen = [first]
     for s in range(k):
-        field = _finite(solver.compute_distance(chosen[-1]))
-        field[chosen[-1]] = 0.0
-        fields[:, s] = field
-        nearest = np.minimum(nearest, field)
+        fields[s] = field_s = _finite(field(chosen[-1]))
+        np.minimum(nearest, field_s, out=nearest)
+        # Never pick a landmark twice, even if the solver is off near it (the earlier ones stay at -1:
+        # fields are >= 0).
+        nearest[chosen[-1]] = -1.0
+        fields[s, chosen[-1]] = 0.0
         if s + 1 < k:
-            nearest[chosen] = -1.0  # never pick a landmark twice, even if the solver is off near it
-            chosen.append(int(np.argmax(nearest)))
-    return chosen, fields
+            chosen.append(_farthest(nearest))
+    return chosen, fields.T
+
+
+def _farthest(nearest: np.ndarray) -> int:
+    """The lowest-index vertex within TIE of the largest value: on a symmetric mesh, vertices equally
+    far in exact arithmetic differ by solver rounding (~1e-14 relative), which would otherwise pick
+    among them differently on every solver and platform."""
+    top = nearest.max()
+    return int(np.argmax(nearest >= top - TIE * abs(top)))
 
 
 def _finite(field: np.ndarray) -> np.ndarray:
     field = np.asarray(field, dtype=np.float64)
-    ok = np.isfinite(field)
-    if not ok.all():
+    if not np.isfinite(field.sum()):  # one pass when all is finite (nearly always)
+        ok = np.isfinite(field)
         field = np.where(ok, field, field[ok].max() if ok.any() else 0.0)
     return np.maximum(field, 0.0)
