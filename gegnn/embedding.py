@@ -9,6 +9,7 @@ __all__ = ["Embedding"]
 
 CHUNK_VALUES = 1 << 20  # values a decoded chunk holds in flight on a CPU: intermediates stay in cache
 ACCELERATOR_CHUNK_VALUES = 1 << 27  # ... on a GPU: few launches (512 MB of fp32 codes)
+SURFACE_CHUNK = 4096  # pairs of distinct surface points blended at once (6 code rows a pair)
 
 
 def _bf16_is_fast(device: torch.device) -> bool:
@@ -76,9 +77,13 @@ class Embedding:
             if lo < 0 or hi >= self.num_vertices:
                 raise IndexError(f"vertex index out of range: {lo if lo < 0 else hi} "
                                  f"(the mesh has {self.num_vertices} vertices)")
-        # The decoder of a zero difference is not exactly 0; a distance is. masked_fill, unlike
-        # out[i == j] = 0, needs no count of the mask, so no host sync.
-        out = self._decode_all(self.features, i, j).masked_fill_(i == j, 0).reshape(shape)
+        out = torch.empty(len(i), dtype=torch.float32, device=self.features.device)
+        with torch.inference_mode():
+            for s in range(0, len(i), self.chunk):
+                out[s:s + self.chunk] = self._decode(self.features, i[s:s + self.chunk], j[s:s + self.chunk])
+            # The decoder of a zero difference is not exactly 0; a distance is. masked_fill, unlike
+            # out[i == j] = 0, needs no count of the mask, so no host sync.
+            out = out.masked_fill_(i == j, 0).mul_(self.scale).reshape(shape)
         return out if as_tensor else out.cpu().numpy()
 
     def surface_distance(self, face_a, bary_a, face_b, bary_b) -> np.ndarray:
@@ -92,15 +97,24 @@ class Embedding:
         made them define them between vertices), so a point at a vertex gets that vertex's distances
         and the distance is continuous across edges; points at the same place are at distance 0.
         """
-        (codes_a, pos_a, shape_a), (codes_b, pos_b, shape_b) = (
-            self._point_codes(face_a, bary_a), self._point_codes(face_b, bary_b))
-        i = torch.arange(len(codes_a), device=codes_a.device).reshape(shape_a)
-        j = torch.arange(len(codes_a), len(codes_a) + len(codes_b), device=codes_a.device).reshape(shape_b)
-        i, j = torch.broadcast_tensors(i, j)
+        (corners_a, weights_a, pos_a, shape_a), (corners_b, weights_b, pos_b, shape_b) = (
+            self._points(face_a, bary_a), self._points(face_b, bary_b))
+        device = self.features.device
+        i, j = torch.broadcast_tensors(torch.arange(len(pos_a), device=device).reshape(shape_a),
+                                       torch.arange(len(pos_b), device=device).reshape(shape_b))
         shape, i, j = i.shape, i.reshape(-1), j.reshape(-1)
-        positions = torch.cat([pos_a, pos_b])
-        same = (positions[i] - positions[j]).abs().amax(dim=1) <= 1e-12 * self.scale
-        out = self._decode_all(torch.cat([codes_a, codes_b]), i, j).masked_fill_(same, 0)
+        with torch.inference_mode():
+            if 2 * (len(pos_a) + len(pos_b)) <= len(i):  # few points, many pairs (e.g. all): blend each once
+                codes = torch.cat([self._blend(corners_a, weights_a), self._blend(corners_b, weights_b)])
+                out = self._decode_points(codes, torch.cat([pos_a, pos_b]), i, j + len(pos_a))
+            else:  # pairs of distinct points: blend chunk by chunk (1M pairs would hold 2M codes at once)
+                parts = []
+                for s in range(0, len(i), SURFACE_CHUNK):
+                    a, b = i[s:s + SURFACE_CHUNK], j[s:s + SURFACE_CHUNK]
+                    codes = torch.cat([self._blend(corners_a[a], weights_a[a]), self._blend(corners_b[b], weights_b[b])])
+                    n = torch.arange(len(a), device=device)
+                    parts.append(self._decode_points(codes, torch.cat([pos_a[a], pos_b[b]]), n, n + len(a)))
+                out = torch.cat(parts) if parts else torch.empty(0, device=device)
         return out.reshape(shape).cpu().numpy()
 
     def locate(self, points):
@@ -112,8 +126,9 @@ class Embedding:
         self._require_mesh()
         return locate_points(Mesh(self.vertices, self.faces), points)
 
-    def _point_codes(self, face, bary) -> tuple[Tensor, Tensor, tuple]:
-        """Codes (P, C) and positions (P, 3) of surface points, and the shape their faces came in."""
+    def _points(self, face, bary) -> tuple[Tensor, Tensor, Tensor, tuple]:
+        """Surface points as their faces' corners (P, 3), weights (P, 3), positions (P, 3) (float64, the
+        mesh's units) on the codes' device, and the shape the faces came in."""
         self._require_mesh()
         face, bary = np.asarray(face), np.asarray(bary, dtype=np.float64)
         if bary.shape[-1:] != (3,) or bary.shape[:-1] != face.shape or not np.issubdtype(face.dtype, np.integer):
@@ -127,20 +142,25 @@ class Embedding:
         if len(bad):
             raise ValueError(f"barycentric coordinates {flat_bary[bad[0]].tolist()} are not >= 0 summing to 1")
         corners = self.faces[flat_face]
-        device = self.features.device
-        weights = torch.as_tensor(flat_bary, dtype=torch.float32, device=device)
-        with torch.inference_mode():
-            codes = self.decoder.point_codes(self.features[torch.as_tensor(corners, device=device)], weights)
         positions = np.einsum("pk,pkd->pd", flat_bary, self.vertices[corners])
-        return codes, torch.as_tensor(positions, device=device), face.shape
+        device = self.features.device
+        return (torch.as_tensor(corners, device=device), torch.as_tensor(flat_bary, dtype=torch.float32, device=device),
+                torch.as_tensor(positions, device=device), face.shape)
 
-    def _decode_all(self, codes: Tensor, i: Tensor, j: Tensor) -> Tensor:
-        """Distances in the mesh's units of the pairs (codes[i], codes[j]), chunk by chunk."""
+    def _decode_points(self, codes: Tensor, points: Tensor, i: Tensor, j: Tensor) -> Tensor:
+        """Distances in the mesh's units of the pairs (codes[i], codes[j]) of surface points at ``points``:
+        0 where two points are at the same place."""
         out = torch.empty(len(i), dtype=torch.float32, device=codes.device)
-        with torch.inference_mode():
-            for s in range(0, len(i), self.chunk):
-                out[s:s + self.chunk] = self._decode(codes, i[s:s + self.chunk], j[s:s + self.chunk])
-            return out.mul_(self.scale)
+        for s in range(0, len(i), self.chunk):
+            a, b = i[s:s + self.chunk], j[s:s + self.chunk]
+            same = (points[a] - points[b]).abs().amax(dim=1) <= 1e-12 * self.scale
+            out[s:s + len(a)] = self._decode(codes, a, b).masked_fill_(same, 0)
+        return out.mul_(self.scale)
+
+    def _blend(self, corners: Tensor, weights: Tensor) -> Tensor:
+        """Codes (P, C) of points with corners (P, 3) and weights (P, 3) (the decoder's ``point_codes``)."""
+        rows = self.features.index_select(0, corners.reshape(-1)).view(len(corners), 3, -1)
+        return self.decoder.point_codes(rows, weights)
 
     def matrix(self, rows=None, cols=None, dtype=np.float32, out=None, tile: int = 2048,
                progress: bool = False):

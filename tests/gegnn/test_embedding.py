@@ -116,6 +116,10 @@ def test_surface_points_blend_exactly_where_the_codes_are_positions():
     d = emb.surface_distance(fa[:, None], ba[:, None], fb[None], bb[None])  # all pairs: (50, 70)
     straight = np.linalg.norm(at(v, f, fa, ba)[:, None] - at(v, f, fb, bb)[None], axis=2)
     np.testing.assert_allclose(d, straight, rtol=1e-5, atol=1e-6)
+    # The same pairs listed one by one: more points than pairs, so blended chunk by chunk.
+    one_by_one = emb.surface_distance(np.repeat(fa, 70), np.repeat(ba, 70, axis=0), np.tile(fb, 50),
+                                      np.tile(bb, (50, 1)))
+    np.testing.assert_array_equal(one_by_one.reshape(50, 70), d)
     corner = (f[fa[:5]] == f[fa[:5], 1:2]).astype(float)  # a face's second corner is that vertex
     np.testing.assert_allclose(emb.surface_distance(fa[:5], corner, fa[:5, None], corner[:, None]),
                                emb.distance(f[fa[:5], 1], f[fa[:5], 1:2]), atol=0)
