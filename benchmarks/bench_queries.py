@@ -1,0 +1,183 @@
+"""Queries of the shipped model against the heat method and the exact solver, measured in the same run:
+random pairs, the whole distance matrix, and points inside faces.
+
+    python benchmarks/bench_queries.py [STORE] [--mesh ID] [--only queries,matrix,surface]
+
+STORE is a validation store of `pipelines/pretrained/data.sh` (default data/val.zarr); --mesh picks the
+mesh (default dragon-4af53808, 5,224 vertices, the largest held-back one). Sections:
+  - queries: precomputation (landmark fields, network) and 1M random pairs, against the heat method for
+    the same pairs (potpourri3d, one field per distinct source, factorization included) and against the
+    torch decoder path the fused kernel replaced; the model's error on the mesh's stored pairs.
+  - matrix: the N x N matrix by the model (precomputation included), by the heat method's loop over
+    sources, and by the exact solver (window propagation on every core; timed on 256 rows and scaled
+    to N: rows are independent).
+  - surface: over every mesh of the store, distances between random points inside faces against
+    exact distances to the points inserted as vertices, next to the model's error between the
+    corners of the same faces; and the cost of 1M surface-point queries.
+Prints markdown tables (for docs/results.md) with the CPU.
+"""
+from __future__ import annotations
+
+import argparse
+import copy
+import os
+import time
+
+import numpy as np
+import torch
+import zarr
+
+from gegnn import GeGnn
+from gegnn.decoders import PairDecoder
+from gegnn.embedding import Embedding
+from gegnn.landmarks import landmark_fields
+from gegnn.train import METRIC_EPS
+from geodata.geodesic import geodesic_solver
+from geodata.mesh import Mesh
+from geodata.surface_points import insert_points
+
+from bench_gegnn import timed
+from bench_results import cpu_description
+
+
+def load(store, mesh_id):
+    g = zarr.open_group(f"{store}/meshes/{mesh_id}", mode="r")
+    return g["vertices"][:].astype(np.float64), g["faces"][:].astype(np.int64), g
+
+
+def mre(pred, exact):
+    return float(np.mean(np.abs(pred - exact) / (exact + METRIC_EPS)))
+
+
+def heat_pairs(v, f, i, j) -> np.ndarray:
+    """potpourri3d's heat method for the pairs (i, j): one field per distinct i."""
+    import potpourri3d as pp3d
+
+    solver = pp3d.MeshHeatMethodDistanceSolver(v, f)
+    out = np.empty(len(i))
+    order = np.argsort(i, kind="stable")
+    sources, starts = np.unique(i[order], return_index=True)
+    for s, lo, hi in zip(sources, starts, np.append(starts[1:], len(i))):
+        out[order[lo:hi]] = solver.compute_distance(int(s))[j[order[lo:hi]]]
+    return out
+
+
+def section_queries(model, v, f, g, rows):
+    rng = np.random.default_rng(0)
+    i, j = rng.integers(0, len(v), 1_000_000), rng.integers(0, len(v), 1_000_000)
+    k = model.config.landmarks
+    fields = timed(lambda: landmark_fields(v, f, k))[0]
+    embed, emb = timed(lambda: model.embed(v, f))
+    query = timed(lambda: emb.distance(i, j))[0]
+    decoder = copy.deepcopy(emb.decoder)
+    decoder.pair_inputs = lambda codes, a, b: PairDecoder.pair_inputs(decoder, codes, a, b)  # not the fused one
+    torch_path = Embedding(emb.features, decoder, emb.scale, precision="fp32")
+    torch_path.chunk = max(1024, (1 << 19) // emb.features.shape[1])  # its chunk before the fused kernel
+    reference = timed(lambda: torch_path.distance(i, j), repeat=1)[0]
+    heat = timed(lambda: heat_pairs(v, f, i, j), repeat=1)[0]
+    pairs, dist = g["geodesic/pairs"][:].astype(np.int64), g["geodesic/distances"][:]
+    error = mre(emb.distance(pairs[:, 0], pairs[:, 1]), dist)
+    ours = embed + query
+    rows += [
+        ("landmark fields (128 heat-method solves), part of the precomputation", fields, ""),
+        ("precomputation: landmark fields + one forward pass (fp32)", embed, "target <= 0.3 s"),
+        ("1M random queries, fused decoder (fp32)", query, f"{reference / query:.2f}x the torch path; target <= 0.25 s"),
+        ("1M random queries, torch decoder path (reference)", reference, ""),
+        ("heat method, the same 1M pairs (one field per distinct source)", heat, ""),
+        ("precomputation + 1M queries", ours, f"**{heat / ours:.1f}x** faster than the heat method (target >= 10x)"),
+        (f"model error on this mesh's {len(pairs):,} stored pairs", None, f"{100 * error:.2f}%"),
+    ]
+
+
+def section_matrix(model, v, f, rows, exact_rows=256):
+    import potpourri3d as pp3d
+
+    n = len(v)
+    start = time.perf_counter()
+    d = model.embed(v, f).matrix()
+    ours = time.perf_counter() - start
+    start = time.perf_counter()
+    solver = pp3d.MeshHeatMethodDistanceSolver(v, f)
+    heat = np.stack([solver.compute_distance(s) for s in range(n)])
+    heat_s = time.perf_counter() - start
+    from concurrent.futures import ThreadPoolExecutor
+    jobs = os.cpu_count() or 1
+    sample = np.linspace(0, n - 1, exact_rows).astype(int)
+    start = time.perf_counter()
+    with ThreadPoolExecutor(jobs) as pool:
+        blocks = list(pool.map(lambda part: np.stack([geodesic_solver(Mesh(v, f))(int(s)) for s in part]),
+                               np.array_split(sample, jobs)))
+    exact = np.concatenate(blocks)
+    exact_s = (time.perf_counter() - start) * n / exact_rows
+    off = exact > 0
+    rows += [
+        (f"{n} x {n} matrix, model (precomputation included)", ours,
+         f"{heat_s / ours:.1f}x faster than the heat loop, {exact_s / ours:.0f}x than exact; "
+         f"MRE {100 * mre(d[sample][off], exact[off]):.2f}% on {exact_rows} rows"),
+        (f"{n} x {n} matrix, heat method's loop over sources", heat_s,
+         f"MRE {100 * mre(heat[sample][off], exact[off]):.2f}%"),
+        (f"{n} x {n} matrix, exact solver, {jobs} threads (from {exact_rows} rows)", exact_s, ""),
+    ]
+
+
+def section_surface(model, store, rows, sources=8, targets=200):
+    ids = sorted(zarr.open_group(f"{store}/meshes", mode="r").group_keys())
+    table = []
+    for mesh_id in ids:
+        v, f, _ = load(store, mesh_id)
+        emb = model.embed(v, f)
+        rng = np.random.default_rng(0)
+        face = rng.choice(len(f), targets, replace=False)
+        bary = rng.dirichlet([1, 1, 1], targets)
+        refined, vertex = insert_points(Mesh(v, f), face, bary)
+        solve = geodesic_solver(refined)
+        exact = np.stack([solve(int(vertex[s]))[vertex] for s in range(sources)])
+        pred = emb.surface_distance(face[:sources, None], bary[:sources, None], face[None], bary[None])
+        corner = f[face, 0]
+        solve = geodesic_solver(Mesh(v, f))
+        exact_v = np.stack([solve(int(corner[s]))[corner] for s in range(sources)])
+        pred_v = emb.distance(corner[:sources, None], corner[None])
+        on, on_v = exact > 0, exact_v > 0
+        table.append((mesh_id, mre(pred[on], exact[on]), mre(pred_v[on_v], exact_v[on_v])))
+        print(f"{mesh_id}: surface points {100 * table[-1][1]:.2f}%, vertices {100 * table[-1][2]:.2f}%", flush=True)
+    v, f, _ = load(store, ids[0])
+    emb = model.embed(v, f)
+    rng = np.random.default_rng(1)
+    fa, fb = rng.integers(0, len(f), 1_000_000), rng.integers(0, len(f), 1_000_000)
+    ba, bb = rng.dirichlet([1, 1, 1], 1_000_000), rng.dirichlet([1, 1, 1], 1_000_000)
+    i, j = rng.integers(0, len(v), 1_000_000), rng.integers(0, len(v), 1_000_000)
+    surface_s, vertex_s = timed(lambda: emb.surface_distance(fa, ba, fb, bb), 1)[0], timed(lambda: emb.distance(i, j))[0]
+    print("\n| mesh | between surface points (vs inserted vertices) | between the faces' corners |\n|---|---:|---:|")
+    for mesh_id, s, c in table:
+        print(f"| {mesh_id} | {100 * s:.2f}% | {100 * c:.2f}% |")
+    print(f"| **mean** | **{100 * np.mean([t[1] for t in table]):.2f}%** | "
+          f"**{100 * np.mean([t[2] for t in table]):.2f}%** |")
+    rows += [("1M surface-point queries (blend + decode)", surface_s, f"{surface_s / vertex_s:.1f}x vertex queries"),
+             ("1M vertex queries, same mesh", vertex_s, "")]
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("store", nargs="?", default="data/val.zarr")
+    ap.add_argument("--mesh", default="dragon-4af53808")
+    ap.add_argument("--only", default="queries,matrix,surface")
+    args = ap.parse_args()
+    model = GeGnn.pretrained().eval()
+    v, f, g = load(args.store, args.mesh)
+    print(f"{args.mesh}: {len(v)} vertices; CPU: {cpu_description()}, {torch.get_num_threads()} threads, "
+          f"load average {os.getloadavg()[0]:.1f}; torch {torch.__version__}")
+    rows = []
+    only = args.only.split(",")
+    if "queries" in only:
+        section_queries(model, v, f, g, rows)
+    if "matrix" in only:
+        section_matrix(model, v, f, rows)
+    if "surface" in only:
+        section_surface(model, args.store, rows)
+    print("\n| what | seconds | note |\n|---|---:|---|")
+    for name, seconds, note in rows:
+        print(f"| {name} | {'' if seconds is None else f'{seconds:.3f}'} | {note} |")
+
+
+if __name__ == "__main__":
+    main()
