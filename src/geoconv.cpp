@@ -1,12 +1,13 @@
 // The neighbourhood term of GeoConv (gegnn/nn/geoconv.py) with max aggregation, for inference on a CPU:
 //
-//     y_i = max_{j -> i} ( h_j + W_g [v_i - v_j | |v_i - v_j|] ),    y_i = 0 for a vertex without edges,
+//     y_i = s_i + max_{j -> i} ( h_j + W_g [v_i - v_j | |v_i - v_j|] ),    the max = 0 for a vertex without edges,
 //
 // h = W_1 f (the neighbour features, one row per vertex), W_g the geometric block (G x C, G = 3 relative
-// coordinates and/or the edge length). The torch version gathers h to every edge, adds the geometric term
-// (an (E x G) x (G x C) matmul) and scatters the maximum back: three passes over an (E x C) array. Here each
-// vertex's incoming edges (contiguous: edges are sorted by receiver, as gegnn builds them) are reduced in
-// registers, one pass over h's rows and no (E x C) array; vertices are split between threads.
+// coordinates and/or the edge length), s = W_0 f + b the vertex's own term. The torch version gathers h to every
+// edge, adds the geometric term (an (E x G) x (G x C) matmul), scatters the maximum back and adds s: three
+// passes over an (E x C) array. Here each vertex's incoming edges (contiguous: edges are sorted by receiver, as
+// gegnn builds them) are reduced in one pass over h's rows, no (E x C) array, and y is the only new array
+// (h and s are read in place: the two halves of one matmul's output); vertices are split between threads.
 //
 // The geometric term is summed in the order g = 0..G-1 and then added to h_j, as torch's addmm does, so
 // results equal the torch version's to within float rounding (the matmul kernel may fuse differently).
@@ -35,9 +36,9 @@ typedef float V __attribute__((vector_size(LANES * sizeof(float))));  // GCC/Cla
 #endif
 
 struct Edges {
-    const float *h, *pos, *w;
+    const float *h, *self, *pos, *w;
     const int64_t *receiver, *sender;
-    int64_t channels, g;
+    int64_t h_stride, self_stride, channels, g;  // row strides in floats
     bool relative, length;
 };
 
@@ -46,9 +47,10 @@ void reduce_vertices(const Edges& E, const int64_t* first_edge, int64_t v0, int6
     const int64_t C = E.channels, full = C / LANES * LANES;
     for (int64_t v = v0; v < v1; ++v) {
         float* y = out + v * C;
+        const float* own = E.self + v * E.self_stride;
         const int64_t lo = first_edge[v - v0], hi = first_edge[v - v0 + 1];
         if (lo == hi) {
-            std::fill(y, y + C, 0.0f);
+            std::copy(own, own + C, y);
             continue;
         }
         std::fill(y, y + C, -INFINITY);
@@ -65,7 +67,7 @@ void reduce_vertices(const Edges& E, const int64_t* first_edge, int64_t v0, int6
                 geo[g++] = dz;
             }
             if (E.length) geo[g++] = std::sqrt(dx * dx + dy * dy + dz * dz);
-            const float* hj = E.h + j * C;
+            const float* hj = E.h + j * E.h_stride;
             int64_t c = 0;
             for (; c < full; c += LANES) {
                 V t = {}, w, hv, yv;
@@ -85,20 +87,25 @@ void reduce_vertices(const Edges& E, const int64_t* first_edge, int64_t v0, int6
                 y[c] = std::max(y[c], hj[c] + t);
             }
         }
+        for (int64_t c = 0; c < C; ++c) y[c] = own[c] + y[c];
     }
 }
 
 using Rows = nb::ndarray<const float, nb::ndim<2>, nb::c_contig, nb::device::cpu>;
+using StridedRows = nb::ndarray<const float, nb::ndim<2>, nb::device::cpu>;  // rows of any stride, columns dense
 using Index = nb::ndarray<const int64_t, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
 using Out = nb::ndarray<float, nb::ndim<2>, nb::c_contig, nb::device::cpu>;
 
 // Returns false (and writes nothing) when the edges are not sorted by receiver.
-bool max_messages(Rows h, Rows pos, Index receiver, Index sender, Rows w_geometry, bool relative, bool length,
-                  Out out, int threads) {
+bool max_messages(StridedRows h, StridedRows self, Rows pos, Index receiver, Index sender, Rows w_geometry,
+                  bool relative, bool length, Out out, int threads) {
     const int64_t n = static_cast<int64_t>(h.shape(0)), C = static_cast<int64_t>(h.shape(1));
     const int64_t E = static_cast<int64_t>(receiver.shape(0));
     const int64_t g = 3 * relative + length;
-    if (static_cast<int64_t>(pos.shape(0)) != n || pos.shape(1) != 3 || static_cast<int64_t>(sender.shape(0)) != E ||
+    if (h.stride(1) != 1 || self.stride(1) != 1)
+        throw std::invalid_argument("max_messages: h and self need contiguous columns");
+    if (static_cast<int64_t>(self.shape(0)) != n || static_cast<int64_t>(self.shape(1)) != C ||
+        static_cast<int64_t>(pos.shape(0)) != n || pos.shape(1) != 3 || static_cast<int64_t>(sender.shape(0)) != E ||
         static_cast<int64_t>(w_geometry.shape(0)) != g || (g && static_cast<int64_t>(w_geometry.shape(1)) != C) ||
         static_cast<int64_t>(out.shape(0)) != n || static_cast<int64_t>(out.shape(1)) != C)
         throw std::invalid_argument("max_messages: shapes disagree");
@@ -115,7 +122,8 @@ bool max_messages(Rows h, Rows pos, Index receiver, Index sender, Rows w_geometr
         while (e < E && r[e] < v) ++e;
         first[v] = e;
     }
-    const Edges edges{h.data(), pos.data(), g ? w_geometry.data() : nullptr, r, s, C, g, relative, length};
+    const Edges edges{h.data(), self.data(), pos.data(), g ? w_geometry.data() : nullptr, r, s,
+                      static_cast<int64_t>(h.stride(0)), static_cast<int64_t>(self.stride(0)), C, g, relative, length};
     const int64_t parts = std::max<int64_t>(1, std::min<int64_t>(threads, E / 4096));
     std::vector<std::thread> pool;
     auto part = [&](int64_t t) {
@@ -132,8 +140,10 @@ bool max_messages(Rows h, Rows pos, Index receiver, Index sender, Rows w_geometr
 
 NB_MODULE(_geoconv, m) {
     m.doc() = "GeoConv's max over incoming edge messages without an (edges x channels) array (src/geoconv.cpp).";
-    m.def("max_messages", &max_messages, nb::arg("h"), nb::arg("pos"), nb::arg("receiver"), nb::arg("sender"),
-          nb::arg("w_geometry"), nb::arg("relative"), nb::arg("length"), nb::arg("out"), nb::arg("threads") = 1,
-          "out[i] = max over edges j -> i of h[j] + w_geometry^T [pos_i - pos_j | |pos_i - pos_j|] (0 without edges); "
-          "float32 / int64, C-contiguous; False (nothing written) when the edges are not sorted by receiver.");
+    m.def("max_messages", &max_messages, nb::arg("h"), nb::arg("self"), nb::arg("pos"), nb::arg("receiver"),
+          nb::arg("sender"), nb::arg("w_geometry"), nb::arg("relative"), nb::arg("length"), nb::arg("out"),
+          nb::arg("threads") = 1,
+          "out[i] = self[i] + max over edges j -> i of h[j] + w_geometry^T [pos_i - pos_j | |pos_i - pos_j|] (the max "
+          "is 0 without edges); float32 / int64; h and self may be row-strided views, the rest C-contiguous; False "
+          "(nothing written) when the edges are not sorted by receiver.");
 }

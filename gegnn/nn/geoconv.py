@@ -55,24 +55,26 @@ class GeoConv(nn.Module):
         bias = torch.cat([self.lin_self.bias, self.lin_self.bias.new_zeros(self.out_channels)])
         own, neighbor = F.linear(x, weight, bias).split(self.out_channels, dim=1)
         if self.aggr == "max" and _inference_on_cpu(neighbor):
-            fused = self._fused_max(neighbor, pos, edge_index)
+            fused = self._fused_max(own, neighbor, pos, edge_index)
             if fused is not None:
-                return own + fused
+                return fused
         msg = neighbor.index_select(0, j)  # not neighbor[j]: advanced indexing is ~6x slower for rows
         geometry = self.edge_geometry(pos, i, j)
         if geometry is not None:  # fused multiply-add: one pass over the (E, C) messages
             msg = torch.addmm(msg, geometry.to(msg.dtype), self.lin_geometry.weight.t().to(msg.dtype))
         return own + aggregate(msg, i, x.shape[0], self.aggr)
 
-    def _fused_max(self, neighbor: Tensor, pos: Tensor, edge_index: Tensor) -> Tensor | None:
-        """The max over edge messages in one pass without an (E, C) array (``src/geoconv.cpp``); None
-        where the edges are not sorted by receiver (gegnn's hierarchies always are)."""
+    def _fused_max(self, own: Tensor, neighbor: Tensor, pos: Tensor, edge_index: Tensor) -> Tensor | None:
+        """``own`` + the max over edge messages, in one pass without an (E, C) array and reading both halves
+        of the matmul's output in place (``src/geoconv.cpp``: one new array, where a fresh array costs its
+        page faults on every call); None where the edges are not sorted by receiver (gegnn's hierarchies
+        always are)."""
         from .._geoconv import max_messages
 
         w = (self.lin_geometry.weight.t() if self.lin_geometry is not None
              else neighbor.new_zeros(0, self.out_channels))
-        out = torch.empty_like(neighbor, memory_format=torch.contiguous_format)
-        ok = max_messages(neighbor.contiguous(), pos.float().contiguous(), edge_index[0].contiguous(),
+        out = torch.empty(neighbor.shape, dtype=neighbor.dtype)
+        ok = max_messages(neighbor, own, pos.float().contiguous(), edge_index[0].contiguous(),
                           edge_index[1].contiguous(), w.detach().float().contiguous(), self.relative_position,
                           self.edge_length, out, torch.get_num_threads())
         return out if ok else None
