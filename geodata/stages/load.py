@@ -41,12 +41,12 @@ def load_mesh_bytes(data: bytes, suffix: str, return_map: bool = False):
         loaded = trimesh.load(io.BytesIO(parsed), file_type=suffix.lstrip(".").lower(), process=False,
                               force="mesh", maintain_order=True)
     except Exception as exc:  # trimesh raises many types for garbage input
-        reason = explain(data, suffix) or \
-            f"unreadable as {suffix.lstrip('.').upper()}: {one_line(exc, with_type=False)}"
-        raise MeshError("load", reason) from None
+        raise MeshError("load", explain(data, suffix) or _unreadable(exc, suffix)) from None
     if not isinstance(loaded, trimesh.Trimesh):
         raise MeshError("load", "file holds no triangle mesh")
-    vertices = np.asarray(loaded.vertices, dtype=np.float64).reshape(-1, 3)
+    vertices = np.asarray(loaded.vertices, dtype=np.float64)
+    if vertices.ndim != 2 or vertices.shape[1] != 3:
+        raise MeshError("load", explain(data, suffix) or "vertex coordinates are not (x, y, z) triples")
     faces = np.asarray(loaded.faces).reshape(-1, 3)
     polygons = _ply_polygons(loaded) if suffix.lower() == ".ply" else None
     if polygons is not None:  # trimesh fanned them: ear-clip the file's own corner lists instead
@@ -102,11 +102,42 @@ def _triangulated(data: bytes, suffix: str) -> bytes:
 def explain(data: bytes, suffix: str) -> str | None:
     """Why a file the parser refused is broken, in the file's own terms (its line numbers, its index
     base, its header's counts); None when no structural defect is found."""
-    check = {".obj": _explain_obj, ".off": _explain_off, ".ply": _explain_ply}.get(suffix.lower())
+    check = {".obj": _explain_obj, ".off": _explain_off, ".ply": _explain_ply, ".stl": _explain_stl}.get(
+        suffix.lower())
     try:
         return check(data) if check else None
-    except (ValueError, IndexError, UnicodeDecodeError):
+    except (ValueError, IndexError, KeyError, StopIteration, UnicodeDecodeError):
         return None
+
+
+# What the parser's own words mean in the file's terms, for the defects `explain` cannot pin down.
+PARSER_SAYS = {
+    "unexpected length": "the binary data does not match the header's elements and properties (a truncated "
+                         "file, or counts or property types changed in the header)",
+    "chunk was not expected length": "its chunk lengths do not match the data (a truncated or corrupted file)",
+    "multiple of element size": "a buffer's length does not match its accessors (a truncated or corrupted file)",
+}
+
+
+def _unreadable(exc: BaseException, suffix: str) -> str:
+    """The reason for a file the parser refused and `explain` found nothing in: the parser's complaint
+    where it speaks of the file, never a Python error message."""
+    what = suffix.lstrip(".").upper()
+    said = one_line(exc, with_type=False)
+    meaning = next((m for key, m in PARSER_SAYS.items() if key in said), None)
+    return f"unreadable as {what}: {meaning or f'the data does not follow the {what} format'}"
+
+
+def _is_number(word: str) -> bool:
+    try:
+        float(word)
+    except ValueError:
+        return False
+    return True
+
+
+def _is_index(word: str) -> bool:
+    return word.lstrip("-").isdigit()
 
 
 def _obj_vertex_count(data: bytes) -> int:
@@ -128,13 +159,28 @@ def _file_vertex_count(data: bytes, suffix: str) -> int:
 def _explain_obj(data: bytes) -> str | None:
     lines = data.decode("latin-1").splitlines()
     n = _obj_vertex_count(data)
-    seen = 0
+    seen, width = 0, None
     for number, line in enumerate(lines, 1):
+        words = line.split()
         if line.startswith(("v ", "v\t")):
             seen += 1
+            bad = next((w for w in words[1:] if not _is_number(w)), None)
+            if bad is not None:
+                return f"line {number}: vertex value {bad!r} is not a number"
+            if len(words) < 4:
+                return f"line {number}: a vertex needs three coordinates x y z, this one has {len(words) - 1}"
+            if width is not None and len(words) != width:
+                return (f"line {number}: a vertex with {len(words) - 1} values where the ones before have "
+                        f"{width - 1} (x y z, and optionally w or r g b, alike on every line)")
+            width = len(words)
         elif line.startswith(("f ", "f\t")):
-            for token in line.split()[1:]:
-                index = int(token.split("/")[0])
+            if len(words) < 4:
+                return f"line {number}: a face needs 3 or more corners, this one has {len(words) - 1}"
+            for token in words[1:]:
+                head = token.split("/")[0]
+                if not _is_index(head):
+                    return f"line {number}: face corner {token!r} is not a vertex index"
+                index = int(head)
                 resolved = seen + index + 1 if index < 0 else index
                 if not 1 <= resolved <= n:
                     return f"line {number}: face refers to vertex {index}; the file has {n} vertices " \
@@ -147,12 +193,35 @@ def _data_lines(lines: list[str]) -> list[str]:
 
 
 def _explain_off(data: bytes) -> str | None:
-    layout = off_layout(data.decode("latin-1").splitlines())
+    text = data.decode("latin-1").splitlines()
+    try:
+        layout = off_layout(text)
+    except (ValueError, IndexError):
+        return "the OFF header's counts (vertices faces edges) are not integers"
     if layout is None:
         return "not an OFF file: no OFF header on the first line"
     lines, first, nv, nf = layout
     if len(lines) - first < nv + nf:
         return f"OFF header declares {nv} vertices and {nf} faces but the file holds {len(lines) - first} data lines"
+    for k in lines[first:first + nv]:
+        words = text[k].split()
+        bad = next((w for w in words if not _is_number(w)), None)
+        if bad is not None or len(words) < 3:
+            return f"line {k + 1}: a vertex needs three numbers x y z" + (f"; {bad!r} is not one" if bad else "")
+    for k in lines[first + nv:first + nv + nf]:
+        words = text[k].split()
+        bad = next((w for w in words if not _is_number(w)), None)
+        if bad is not None:
+            return f"line {k + 1}: {bad!r} is not a number"
+        if not _is_index(words[0]) or int(words[0]) < 3 or len(words) < 1 + int(words[0]):
+            return f"line {k + 1}: a face is a corner count of 3 or more and that many vertex indices"
+        corners = words[1:1 + int(words[0])]
+        bad = next((w for w in corners if not _is_index(w)), None)
+        if bad is not None:
+            return f"line {k + 1}: face corner {bad!r} is not a vertex index"
+        bad = next((w for w in corners if not 0 <= int(w) < nv), None)
+        if bad is not None:
+            return f"line {k + 1}: face refers to vertex {bad}; the file has {nv} vertices (OFF counts from 0)"
     return None
 
 
@@ -166,7 +235,17 @@ def _explain_ply(data: bytes) -> str | None:
     if not data.startswith(b"ply") or end < 0:
         return "PLY header truncated (no end_header line)" if data.startswith(b"ply") else \
             "not a PLY file: it does not start with 'ply'"
+    odd = next((k for k, byte in enumerate(data[:end]) if byte > 127), None)
+    if odd is not None:
+        return f"the PLY header is not ASCII text (byte 0x{data[odd]:02x} at offset {odd})"
     header = data[:end].decode("latin-1").splitlines()
+    for number, line in enumerate(header, 1):
+        words = line.split()
+        if words[:1] == ["element"] and (len(words) < 3 or not words[2].isdigit()):
+            return f"header line {number}: {line.strip()!r}: an element needs a name and a count"
+        if words[:1] == ["property"] and not all(w in PLY_SIZES for w in words[1:-1][:3 if words[1:2] == ["list"] else 1]
+                                                  if w != "list"):
+            return f"header line {number}: {line.strip()!r}: unknown property type"
     body = data[data.index(b"\n", end) + 1:] if b"\n" in data[end:] else b""
     fmt = next(line.split()[1] for line in header if line.startswith("format"))
     elements, scalar_bytes = [], {}
@@ -182,9 +261,34 @@ def _explain_ply(data: bytes) -> str | None:
         held = len(_data_lines(body.decode("latin-1").splitlines()))
         if held < sum(counts.values()):
             return f"PLY header declares {nv} vertices and {nf} faces but the file holds {held} data lines"
+        bad = next(((k, w) for k, line in enumerate(_data_lines(body.decode("latin-1").splitlines()), 1)
+                    for w in line.split() if not _is_number(w)), None)
+        if bad:
+            return f"data line {bad[0]} after the header: {bad[1]!r} is not a number"
     elif elements and elements[0][0] == "vertex" and nv * scalar_bytes.get("vertex", 0) > len(body):
         return f"PLY header declares {nv} vertices ({nv * scalar_bytes['vertex']} bytes) but only " \
                f"{len(body)} bytes follow the header"
+    return None
+
+
+def _explain_stl(data: bytes) -> str | None:
+    if len(data) >= 84 and 84 + 50 * int.from_bytes(data[80:84], "little") == len(data):
+        return None  # binary, of the size its header says
+    if not data.lstrip().startswith(b"solid"):
+        count = int.from_bytes(data[80:84], "little") if len(data) >= 84 else 0
+        return (f"binary STL header declares {count} triangles ({84 + 50 * count} bytes) but the file has "
+                f"{len(data)} bytes") if len(data) >= 84 else f"not an STL file: {len(data)} bytes, no 'solid' header"
+    vertices = 0
+    for number, line in enumerate(data.decode("latin-1").splitlines(), 1):
+        words = line.split()
+        if words[:1] == ["vertex"]:
+            vertices += 1
+            if len(words) != 4 or not all(_is_number(w) for w in words[1:]):
+                return f"line {number}: a vertex line is 'vertex x y z', got {line.strip()[:60]!r}"
+        elif words[:1] == ["endfacet"]:
+            if vertices != 3:
+                return f"line {number}: a facet has {vertices} vertices; it needs 3"
+            vertices = 0
     return None
 
 

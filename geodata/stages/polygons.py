@@ -156,9 +156,12 @@ def triangulate_obj_text(text: str) -> str:
         if len(tokens) == 3:
             out.append("f " + " ".join(tokens))
             continue
+        corners = [int(t.split("/")[0]) - 1 for t in tokens]
+        if min(corners) < 0 or max(corners) >= len(positions):
+            raise ValueError("a corner out of range")  # left to the parser and load.explain
         try:
-            tris = triangulate_polygon(positions[[int(t.split("/")[0]) - 1 for t in tokens]])
-        except (PolygonError, IndexError) as exc:
+            tris = triangulate_polygon(positions[corners])
+        except PolygonError as exc:
             raise PolygonError(f"line {number}: polygon of {len(tokens)} corners cannot be triangulated "
                                f"faithfully: {exc}") from None
         out += [f"f {tokens[a]} {tokens[b]} {tokens[c]}" for a, b, c in tris]
@@ -210,9 +213,11 @@ def triangulate_off_text(text: str) -> str:
             faces.append(lines[k])
             continue
         corners = [int(w) for w in words[1:1 + n]]
+        if len(corners) < n or min(corners) < 0 or max(corners) >= len(positions):
+            raise ValueError("a corner missing or out of range")  # left to the parser and load.explain
         try:
             tris = triangulate_polygon(positions[corners])
-        except (PolygonError, IndexError) as exc:
+        except PolygonError as exc:
             raise PolygonError(f"line {k + 1}: polygon of {n} corners cannot be triangulated faithfully: "
                                f"{exc}") from None
         faces += [f"3 {corners[a]} {corners[b]} {corners[c]}" for a, b, c in tris]
@@ -225,12 +230,18 @@ def triangulate_faces(vertices: np.ndarray, polygons) -> np.ndarray:
     tris = []
     for number, corners in enumerate(polygons):
         corners = np.asarray(corners, dtype=np.int64)
+        if len(corners) < 3:
+            raise PolygonError(f"face {number} (counted from 0) has {len(corners)} corners; a face needs 3 or more")
+        bad = corners[(corners < 0) | (corners >= len(vertices))]
+        if len(bad):
+            raise PolygonError(f"face {number} (counted from 0) refers to vertex {bad[0]}; the file has "
+                               f"{len(vertices)} vertices (counted from 0)")
         if len(corners) == 3:
             tris.append(corners[None])
             continue
         try:
             local = triangulate_polygon(vertices[corners])
-        except (PolygonError, IndexError) as exc:
+        except PolygonError as exc:
             raise PolygonError(f"face {number} (counted from 0): polygon of {len(corners)} corners cannot be "
                                f"triangulated faithfully: {exc}") from None
         tris.append(corners[np.asarray(local, dtype=np.int64).reshape(-1, 3)])

@@ -1,3 +1,5 @@
+import re
+
 import numpy as np
 import pytest
 
@@ -51,7 +53,8 @@ BAD_INPUTS = {
     "not a mesh": (b"\x89PNG\r\n\x1a\n" + b"\0" * 200, ".stl", ""),
     "nan": (b"v 0 0 0\nv 1 0 nan\nv 0 1 0\nf 1 2 3\n", ".obj", "NaN/inf"),
     "inf": (b"OFF\n3 1 0\n0 0 0\n1 0 inf\n0 1 0\n3 0 1 2\n", ".off", "NaN/inf"),
-    "index out of range": (b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n", ".off", "range"),
+    "index out of range": (b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n", ".off",
+                           "line 6: face refers to vertex 7; the file has 3 vertices (OFF counts from 0)"),
     "no faces": (b"v 0 0 0\nv 1 0 0\nv 0 1 0\n", ".obj", ""),
     "all degenerate": (b"v 0 0 0\nv 1 0 0\nv 2 0 0\nv 0 1 0\nf 1 2 3\nf 1 1 4\n", ".obj", "degenerate"),
     # reasons a user can act on, in the file's own terms
@@ -79,6 +82,67 @@ def test_bad_input_raises_one_line_mesh_error(name):
         load_mesh_bytes(data, suffix)
     assert info.value.stage == "load"
     assert words in info.value.reason and "\n" not in info.value.reason and info.value.reason
+
+
+# Phrases of Python's own error messages: a reason holding one speaks of the code, not of the file.
+CODE_TERMS = re.compile(r"invalid literal|could not be broadcast|out of bounds for axis|codec can't|values to unpack|"
+                        r"zero-size array|has no attribute|NoneType|cannot reshape|list index|could not convert|"
+                        r"unexpected keyword|Error\b|Exception|Traceback")
+
+
+def mutated(data: bytes, rng) -> bytes:
+    """One random defect of the kinds found in the wild: bytes flipped, the file cut, a chunk repeated, a number
+    replaced by a huge, NaN, negative, fractional or broken one, or a stray line inserted."""
+    kind = rng.integers(6)
+    if kind == 0:
+        data = bytearray(data)
+        for _ in range(rng.integers(1, 5)):
+            data[rng.integers(len(data))] = rng.integers(256)
+        return bytes(data)
+    if kind == 1:
+        return data[:rng.integers(1, len(data))]
+    if kind == 2:
+        start = rng.integers(len(data))
+        end = min(len(data), start + rng.integers(1, 200))
+        return data[:end] + data[start:end] + data[end:]
+    if kind in (3, 4):
+        text = data.decode("latin-1")
+        numbers = list(re.finditer(r"-?\d+(\.\d+)?(e[-+]?\d+)?", text))
+        if not numbers:
+            return data
+        hit = numbers[rng.integers(len(numbers))]
+        value = ["1e308", "nan", "-1", "999999", "-", "4.5", "inf", "1.2.3"][rng.integers(8)]
+        return (text[:hit.start()] + value + text[hit.end():]).encode("latin-1")
+    lines = data.split(b"\n")
+    lines.insert(rng.integers(len(lines) + 1), [b"v 1 2", b"f 1 2 3 4 5", b"garbage", b"3 1 2", b"vertex 1"][rng.integers(5)])
+    return b"\n".join(lines)
+
+
+def sample_files() -> dict:
+    import trimesh
+
+    sphere = trimesh.creation.icosphere(1)
+    files = {f"{fmt} {enc}": (f".{fmt}", sphere.export(file_type=fmt, encoding=enc))
+             for fmt, enc in (("ply", "ascii"), ("ply", "binary"))}
+    files.update({"obj": (".obj", sphere.export(file_type="obj")), "off": (".off", sphere.export(file_type="off")),
+                  "stl ascii": (".stl", sphere.export(file_type="stl_ascii")),
+                  "stl binary": (".stl", sphere.export(file_type="stl")), "glb": (".glb", sphere.export(file_type="glb"))})
+    return {name: (suffix, data.encode() if isinstance(data, str) else data) for name, (suffix, data) in files.items()}
+
+
+@pytest.mark.parametrize("name", ["obj", "off", "ply ascii", "ply binary", "stl ascii", "stl binary", "glb"])
+def test_mutated_files_load_or_fail_with_a_reason_in_the_files_terms(name):
+    suffix, data = sample_files()[name]
+    rng = np.random.default_rng(sum(map(ord, name)))  # seeded: the same mutations every run
+    failed = 0
+    for _ in range(60):
+        bad = mutated(data, rng)
+        try:
+            load_mesh_bytes(bad, suffix)
+        except MeshError as exc:
+            failed += 1
+            assert exc.reason and "\n" not in exc.reason and not CODE_TERMS.search(exc.reason), exc.reason
+    assert failed >= 10  # the mutations do break files
 
 
 def test_latin1_text_loads_without_optional_modules():
