@@ -243,9 +243,10 @@ def _explain_ply(data: bytes) -> str | None:
         words = line.split()
         if words[:1] == ["element"] and (len(words) < 3 or not words[2].isdigit()):
             return f"header line {number}: {line.strip()!r}: an element needs a name and a count"
-        if words[:1] == ["property"] and not all(w in PLY_SIZES for w in words[1:-1][:3 if words[1:2] == ["list"] else 1]
-                                                  if w != "list"):
-            return f"header line {number}: {line.strip()!r}: unknown property type"
+        if words[:1] == ["property"]:
+            types = words[2:4] if words[1:2] == ["list"] else words[1:2]  # list: count type, item type
+            if len(words) < 3 + (words[1:2] == ["list"]) or not all(t in PLY_SIZES for t in types):
+                return f"header line {number}: {line.strip()!r}: a property is a known type and a name"
     body = data[data.index(b"\n", end) + 1:] if b"\n" in data[end:] else b""
     fmt = next(line.split()[1] for line in header if line.startswith("format"))
     elements, scalar_bytes = [], {}
