@@ -36,7 +36,7 @@ from geodata.geodesic import geodesic_solver
 from geodata.mesh import Mesh
 from geodata.surface_points import insert_points
 
-from bench_gegnn import timed
+from bench_gegnn import heat_pairs, timed
 from bench_results import cpu_description
 
 
@@ -47,19 +47,6 @@ def load(store, mesh_id):
 
 def mre(pred, exact):
     return float(np.mean(np.abs(pred - exact) / (exact + METRIC_EPS)))
-
-
-def heat_pairs(v, f, i, j) -> np.ndarray:
-    """potpourri3d's heat method for the pairs (i, j): one field per distinct i."""
-    import potpourri3d as pp3d
-
-    solver = pp3d.MeshHeatMethodDistanceSolver(v, f)
-    out = np.empty(len(i))
-    order = np.argsort(i, kind="stable")
-    sources, starts = np.unique(i[order], return_index=True)
-    for s, lo, hi in zip(sources, starts, np.append(starts[1:], len(i))):
-        out[order[lo:hi]] = solver.compute_distance(int(s))[j[order[lo:hi]]]
-    return out
 
 
 def section_queries(model, v, f, g, rows):

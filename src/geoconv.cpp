@@ -22,18 +22,11 @@
 #include <thread>
 #include <vector>
 
+#include "simd.h"
+
 namespace nb = nanobind;
 
 namespace {
-
-constexpr int LANES = 8;
-typedef float V __attribute__((vector_size(LANES * sizeof(float))));  // GCC/Clang vector extension
-
-#if defined(__GNUC__) && defined(__x86_64__) && !defined(__clang__)
-#define GEGNN_CLONES __attribute__((target_clones("avx2", "default")))
-#else
-#define GEGNN_CLONES
-#endif
 
 struct Edges {
     const float *h, *self, *pos, *w;
