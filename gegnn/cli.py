@@ -228,9 +228,8 @@ def query(files, pretrained, source, pairs_csv, points_file, output, exact, path
     if path_to is not None and source is None:
         raise click.UsageError("--path goes with --source (the path runs from the source)")
     if points_file:
-        _output_suffix(output, (".npy", ".csv"))
-        return _query_points(model_spec, pretrained, mesh_path, points_file, output, exact, prepare, device,
-                             precision)
+        return _query_points(model_spec, pretrained, mesh_path, points_file, output,
+                             _output_suffix(output, (".npy", ".csv")), exact, prepare, device, precision)
     suffix = _output_suffix(output, (".csv",) if pairs_csv else (".npy", ".ply", ".png"))
     qm = _load_mesh(mesh_path, prepare)
     try:
@@ -392,8 +391,9 @@ def pairwise(files, pretrained, output, rows_file, dtype, exact, heat, jobs, pre
             what = f"predicted {kind}"
             emb = _load_model(model_spec, pretrained, device).embed(qm.mesh.vertices, qm.mesh.faces,
                                                                     precision=precision)
-            emb.matrix(matrix.mesh_rows, None if rows_file is None else matrix.mesh_cols, dtype=dtype,
-                       out=matrix, progress=True)
+            # float32 tiles: the file converts them to --dtype and checks the range, once for every source
+            emb.matrix(matrix.mesh_rows, None if rows_file is None else matrix.mesh_cols, out=matrix,
+                       progress=True)
     except (MeshError, ValueError) as exc:
         raise click.ClickException(f"{name}: {exc}") from None
     out.close()
@@ -403,7 +403,8 @@ def pairwise(files, pretrained, output, rows_file, dtype, exact, heat, jobs, pre
                f"{seconds:.1f} s, written to {output}")
 
 
-def _query_points(model_spec, pretrained, mesh_path, points_file, output, exact, prepare, device, precision):
+def _query_points(model_spec, pretrained, mesh_path, points_file, output, suffix, exact, prepare, device,
+                  precision):
     """``gegnn query --points``: the (P, P) matrix between surface points, optionally against exact distances
     between the same points inserted as vertices."""
     import numpy as np
@@ -436,7 +437,7 @@ def _query_points(model_spec, pretrained, mesh_path, points_file, output, exact,
         errors = np.concatenate([relative_errors(d[p], exact_d[p], qm.scale, p) for p in range(len(d))])
         click.echo(f"mean relative error vs exact (points inserted as vertices): {100 * np.nanmean(errors):.2f}% "
                    f"(median {100 * np.nanmedian(errors):.2f}%, max {100 * np.nanmax(errors):.1f}%)")
-    if output and output.lower().endswith(".npy"):
+    if suffix == ".npy":
         np.save(output, d)
     else:
         text = "\n".join(",".join(f"{x:.6g}" for x in row) for row in d.tolist()) + "\n"

@@ -12,6 +12,7 @@ import contextlib
 import torch
 from torch import Tensor, nn
 
+from .nn import cpu_inference
 from .spectral import weyl_shape, weyl_table
 
 __all__ = ["PairDecoder", "DistanceDecoder", "LandmarkDecoder", "SpectralDecoder", "MLP", "mlp"]
@@ -172,7 +173,7 @@ class LandmarkDecoder(PairDecoder):
         """:meth:`inputs` of the pairs (codes[i], codes[j]); on a CPU, in fp32 and without gradients, in one
         fused pass over each pair's codes (``src/pair_features.cpp``: no (pairs x K) intermediates; the same
         values to within float rounding)."""
-        if not self._fused(codes):
+        if not cpu_inference(codes):
             return super().pair_inputs(codes, i, j)
         from ._pair_features import landmark_features
 
@@ -184,7 +185,7 @@ class LandmarkDecoder(PairDecoder):
         return x, (lower, upper)
 
     def pair_width(self, codes: Tensor) -> int:
-        return self.mlp[0].in_features if self._fused(codes) else super().pair_width(codes)
+        return self.mlp[0].in_features if cpu_inference(codes) else super().pair_width(codes)
 
     def point_codes(self, corners: Tensor, bary: Tensor) -> Tensor:
         """The blend of the corners' codes, except the distance to the nearest landmark, which is that of
@@ -193,11 +194,6 @@ class LandmarkDecoder(PairDecoder):
         d, k = self.embed_dim, self.k
         codes[:, d + k] = codes[:, d:d + k].amin(dim=1)
         return codes
-
-    @staticmethod
-    def _fused(codes: Tensor) -> bool:
-        return codes.device.type == "cpu" and codes.dtype == torch.float32 and not (
-            torch.is_grad_enabled() and codes.requires_grad)
 
     def output(self, t: Tensor, extra: tuple[Tensor, Tensor]) -> Tensor:
         lower, upper = extra

@@ -19,7 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
-from geodata.mesh import Mesh, MeshError, edge_face_counts, vertex_components
+from geodata.mesh import Mesh, vertex_components
+
+from .query import require_edge_manifold
 
 __all__ = ["MatrixFile", "FileMatrix", "exact_rows", "heat_rows", "ROW_BLOCK"]
 
@@ -110,10 +112,7 @@ def exact_rows(mesh: Mesh, rows: np.ndarray, cols: np.ndarray, out, distance: st
     """Exact distances of mesh vertices ``rows`` x ``cols`` into ``out`` (slice assignment), ROW_BLOCK rows
     per task on ``jobs`` threads (default: every core; the exact geodesic solver releases the GIL)."""
     if distance == "geodesic":
-        _, counts = edge_face_counts(mesh.faces)
-        if (counts > 2).any():
-            raise MeshError("exact", f"{int((counts > 2).sum())} non-manifold edges (exact geodesics need a "
-                                     "manifold mesh; --prepare makes one)")
+        require_edge_manifold(mesh)
         import threading
 
         from geodata.geodesic import geodesic_solver
@@ -152,11 +151,14 @@ def _by_row_blocks(solve, rows: np.ndarray, out, jobs: int, progress: bool, what
     starts = iter(range(0, len(rows), ROW_BLOCK))
     with ThreadPoolExecutor(jobs) as pool, tqdm(total=len(rows), unit="row", disable=not progress,
                                                 desc=what) as bar:
+        def submit(count):
+            return (pool.submit(lambda s=s: (s, solve(rows[s:s + ROW_BLOCK]))) for s in islice(starts, count))
+
         # At most 2 blocks per thread in flight: memory stays bounded however fast the solvers run.
-        running = deque(pool.submit(lambda s=s: (s, solve(rows[s:s + ROW_BLOCK]))) for s in islice(starts, 2 * jobs))
+        running = deque(submit(2 * jobs))
         while running:
             s, block = running.popleft().result()
-            running.extend(pool.submit(lambda s=s: (s, solve(rows[s:s + ROW_BLOCK]))) for s in islice(starts, 1))
+            running.extend(submit(1))
             block = np.where(np.isfinite(block), block, np.nan)  # unreached (another part): no distance
             out[s:s + len(block), 0:out.shape[1]] = block
             bar.update(len(block))

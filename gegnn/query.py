@@ -19,7 +19,8 @@ from .fields import FieldSpec
 from .train import METRIC_EPS
 
 __all__ = ["QueryMesh", "load_query_mesh", "exact_field", "exact_fields", "relative_errors", "read_pairs",
-           "source_part", "largest_part", "resolution_note", "read_indices", "read_points"]
+           "source_part", "largest_part", "resolution_note", "read_indices", "read_points",
+           "require_edge_manifold"]
 
 
 
@@ -88,12 +89,17 @@ def exact_fields(mesh: Mesh, sources: np.ndarray, distance: str = "geodesic") ->
     from geodata.parallel import run_isolated
 
     if distance == "geodesic":
-        _, counts = edge_face_counts(mesh.faces)
-        if (counts > 2).any():
-            raise MeshError("exact", f"{int((counts > 2).sum())} non-manifold edges (exact geodesics need a "
-                                     "manifold mesh; --prepare makes one)")
+        require_edge_manifold(mesh)
     d = run_isolated(_solve_all, mesh, [int(s) for s in sources], distance)
     return np.where(np.isfinite(d), d, np.nan)
+
+
+def require_edge_manifold(mesh: Mesh) -> None:
+    """MeshError unless every edge has at most two faces (the exact geodesic solver needs it)."""
+    _, counts = edge_face_counts(mesh.faces)
+    if (counts > 2).any():
+        raise MeshError("exact", f"{int((counts > 2).sum())} non-manifold edges (exact geodesics need a "
+                                 "manifold mesh; --prepare makes one)")
 
 
 def _solve_all(mesh: Mesh, sources: list[int], distance: str) -> np.ndarray:
@@ -155,12 +161,7 @@ def read_indices(path) -> np.ndarray:
             raise ValueError(f"{path}: expected a 1-D array of integer vertex indices, got {values.dtype} "
                              f"{values.shape}")
         return values.astype(np.int64)
-    lines = [line for line in Path(path).read_text().splitlines() if line.strip()]
-    header = bool(lines) and not lines[0].split(",")[0].strip().lstrip("-").isdigit()
-    try:
-        return np.loadtxt(lines[header:], delimiter=",", dtype=np.int64, usecols=0, ndmin=1)
-    except ValueError as exc:
-        raise ValueError(f"{path}: expected one integer vertex index per line ({exc})") from None
+    return _read_columns(path, np.int64, 0, "one integer vertex index per line")
 
 
 def read_points(path) -> np.ndarray:
@@ -169,33 +170,30 @@ def read_points(path) -> np.ndarray:
     if str(path).endswith(".npy"):
         points = np.load(path, allow_pickle=False)
     else:
-        lines = [line for line in Path(path).read_text().splitlines() if line.strip()]
-        header = bool(lines) and not _is_number(lines[0].split(",")[0])
-        try:
-            points = np.loadtxt(lines[header:], delimiter=",", dtype=np.float64, usecols=(0, 1, 2), ndmin=2)
-        except ValueError as exc:
-            raise ValueError(f"{path}: expected three number columns x,y,z ({exc})") from None
+        points = _read_columns(path, np.float64, (0, 1, 2), "three number columns x,y,z")
     if points.ndim != 2 or points.shape[1] != 3 or not len(points) or not np.isfinite(points).all():
         raise ValueError(f"{path}: expected finite points of shape (P, 3), got {points.dtype} {points.shape}")
     return np.asarray(points, dtype=np.float64)
 
 
-def _is_number(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
-
-
 def read_pairs(path) -> np.ndarray:
     """Pairs (P, 2) int64 from a CSV file of two integer columns; a header line is allowed."""
-    lines = Path(path).read_text().splitlines()
-    header = bool(lines) and not lines[0].split(",")[0].strip().lstrip("-").isdigit()
-    try:
-        pairs = np.loadtxt(lines[header:], delimiter=",", dtype=np.int64, usecols=(0, 1), ndmin=2)
-    except ValueError as exc:
-        raise ValueError(f"{path}: expected two integer columns i,j ({exc})") from None
+    pairs = _read_columns(path, np.int64, (0, 1), "two integer columns i,j")
     if not len(pairs):
         raise ValueError(f"{path}: no pairs")
     return pairs
+
+
+def _read_columns(path, dtype, columns, expected: str) -> np.ndarray:
+    """Columns of a CSV text file as ``dtype`` (1-D for one column); a first line whose first field is no
+    such number is a header and skipped."""
+    from geodata.stages.load import is_index, is_number
+
+    lines = [line for line in Path(path).read_text().splitlines() if line.strip()]
+    is_value = is_index if np.issubdtype(dtype, np.integer) else is_number
+    header = bool(lines) and not is_value(lines[0].split(",")[0].strip())
+    try:
+        return np.loadtxt(lines[header:], delimiter=",", dtype=dtype, usecols=columns,
+                          ndmin=1 if np.isscalar(columns) else 2)
+    except ValueError as exc:
+        raise ValueError(f"{path}: expected {expected} ({exc})") from None

@@ -7,7 +7,7 @@ from torch import Tensor, nn
 
 from .scatter import AGGREGATIONS, aggregate
 
-__all__ = ["GeoConv"]
+__all__ = ["GeoConv", "cpu_inference"]
 
 
 class GeoConv(nn.Module):
@@ -54,7 +54,7 @@ class GeoConv(nn.Module):
         weight = torch.cat([self.lin_self.weight, self.lin_neighbor.weight])
         bias = torch.cat([self.lin_self.bias, self.lin_self.bias.new_zeros(self.out_channels)])
         own, neighbor = F.linear(x, weight, bias).split(self.out_channels, dim=1)
-        if self.aggr == "max" and _inference_on_cpu(neighbor):
+        if self.aggr == "max" and cpu_inference(neighbor):
             fused = self._fused_max(own, neighbor, pos, edge_index)
             if fused is not None:
                 return fused
@@ -90,6 +90,7 @@ class GeoConv(nn.Module):
                 f"relative_position={self.relative_position}, edge_length={self.edge_length}")
 
 
-def _inference_on_cpu(x: Tensor) -> bool:
-    """fp32 on a CPU with nothing to differentiate: where the fused kernel applies."""
+def cpu_inference(x: Tensor) -> bool:
+    """fp32 on a CPU with nothing to differentiate: where the compiled inference kernels apply (this
+    one, and the landmark decoder's, :meth:`gegnn.decoders.LandmarkDecoder.pair_inputs`)."""
     return x.device.type == "cpu" and x.dtype == torch.float32 and not (torch.is_grad_enabled() and x.requires_grad)

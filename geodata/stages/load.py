@@ -128,7 +128,8 @@ def _unreadable(exc: BaseException, suffix: str) -> str:
     return f"unreadable as {what}: {meaning or f'the data does not follow the {what} format'}"
 
 
-def _is_number(word: str) -> bool:
+def is_number(word: str) -> bool:
+    """Whether a text field reads as a number (int, float, nan, inf)."""
     try:
         float(word)
     except ValueError:
@@ -136,7 +137,8 @@ def _is_number(word: str) -> bool:
     return True
 
 
-def _is_index(word: str) -> bool:
+def is_index(word: str) -> bool:
+    """Whether a text field reads as an integer (a sign allowed)."""
     return word.lstrip("-").isdigit()
 
 
@@ -164,7 +166,7 @@ def _explain_obj(data: bytes) -> str | None:
         words = line.split()
         if line.startswith(("v ", "v\t")):
             seen += 1
-            bad = next((w for w in words[1:] if not _is_number(w)), None)
+            bad = next((w for w in words[1:] if not is_number(w)), None)
             if bad is not None:
                 return f"line {number}: vertex value {bad!r} is not a number"
             if len(words) < 4:
@@ -178,7 +180,7 @@ def _explain_obj(data: bytes) -> str | None:
                 return f"line {number}: a face needs 3 or more corners, this one has {len(words) - 1}"
             for token in words[1:]:
                 head = token.split("/")[0]
-                if not _is_index(head):
+                if not is_index(head):
                     return f"line {number}: face corner {token!r} is not a vertex index"
                 index = int(head)
                 resolved = seen + index + 1 if index < 0 else index
@@ -205,18 +207,18 @@ def _explain_off(data: bytes) -> str | None:
         return f"OFF header declares {nv} vertices and {nf} faces but the file holds {len(lines) - first} data lines"
     for k in lines[first:first + nv]:
         words = text[k].split()
-        bad = next((w for w in words if not _is_number(w)), None)
+        bad = next((w for w in words if not is_number(w)), None)
         if bad is not None or len(words) < 3:
             return f"line {k + 1}: a vertex needs three numbers x y z" + (f"; {bad!r} is not one" if bad else "")
     for k in lines[first + nv:first + nv + nf]:
         words = text[k].split()
-        bad = next((w for w in words if not _is_number(w)), None)
+        bad = next((w for w in words if not is_number(w)), None)
         if bad is not None:
             return f"line {k + 1}: {bad!r} is not a number"
-        if not _is_index(words[0]) or int(words[0]) < 3 or len(words) < 1 + int(words[0]):
+        if not is_index(words[0]) or int(words[0]) < 3 or len(words) < 1 + int(words[0]):
             return f"line {k + 1}: a face is a corner count of 3 or more and that many vertex indices"
         corners = words[1:1 + int(words[0])]
-        bad = next((w for w in corners if not _is_index(w)), None)
+        bad = next((w for w in corners if not is_index(w)), None)
         if bad is not None:
             return f"line {k + 1}: face corner {bad!r} is not a vertex index"
         bad = next((w for w in corners if not 0 <= int(w) < nv), None)
@@ -263,7 +265,7 @@ def _explain_ply(data: bytes) -> str | None:
         if held < sum(counts.values()):
             return f"PLY header declares {nv} vertices and {nf} faces but the file holds {held} data lines"
         bad = next(((k, w) for k, line in enumerate(_data_lines(body.decode("latin-1").splitlines()), 1)
-                    for w in line.split() if not _is_number(w)), None)
+                    for w in line.split() if not is_number(w)), None)
         if bad:
             return f"data line {bad[0]} after the header: {bad[1]!r} is not a number"
     elif elements and elements[0][0] == "vertex" and nv * scalar_bytes.get("vertex", 0) > len(body):
@@ -284,7 +286,7 @@ def _explain_stl(data: bytes) -> str | None:
         words = line.split()
         if words[:1] == ["vertex"]:
             vertices += 1
-            if len(words) != 4 or not all(_is_number(w) for w in words[1:]):
+            if len(words) != 4 or not all(is_number(w) for w in words[1:]):
                 return f"line {number}: a vertex line is 'vertex x y z', got {line.strip()[:60]!r}"
         elif words[:1] == ["endfacet"]:
             if vertices != 3:
