@@ -9,8 +9,13 @@ from pathlib import Path
 import click
 
 from .model import PRETRAINED, GeGnnConfig
+from .render import UP_AXES
 
 MODEL_ARG = dict(nargs=-1, required=True, type=click.Path(dir_okay=False), metavar="[CHECKPOINT|NAME] MESH")
+UP_OPTION = click.option("--up", type=click.Choice(["auto", *UP_AXES]), default="auto", show_default=True,
+                         callback=lambda ctx, param, value: None if value == "auto" else value,
+                         help="The mesh's up axis in pictures (auto: +y or +z, by how the mesh stands).")
+SIZE_OPTION = click.option("--size", default=480, show_default=True, help="Pixels across a rendered mesh (PNG).")
 PRETRAINED_HELP = ("Use a model shipped in the package instead of CHECKPOINT: the most accurate one, or NAME "
                    f"({', '.join(repr(name) for name in PRETRAINED)}).")
 
@@ -197,7 +202,10 @@ def evaluate(checkpoint, store, distance, device, csv_path):
 @click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True)
 @click.option("--precision", type=click.Choice(["fp32", "bf16"]), default="fp32", show_default=True,
               help="Network precision (bf16: faster on recent CPUs and GPUs).")
-def query(files, pretrained, source, pairs_csv, points_file, output, exact, path_to, prepare, device, precision):
+@UP_OPTION
+@SIZE_OPTION
+def query(files, pretrained, source, pairs_csv, points_file, output, exact, path_to, prepare, device, precision, up,
+          size):
     """Distances on MESH (OBJ/OFF/PLY/STL/GLB, any units) predicted by CHECKPOINT or --pretrained: geodesic,
     or biharmonic with a biharmonic model (--pretrained biharmonic).
 
@@ -306,7 +314,8 @@ def query(files, pretrained, source, pairs_csv, points_file, output, exact, path
             panels += [Panel(exact_d, "exact", vmin=0, vmax=top),
                        Panel(np.where(np.isnan(err) & on, 0.0, err), "relative error", "magma",
                              "|pred - exact| / exact", 0, 0.1, isolines=0)]
-        save_panels(output, [Row(qm.mesh.vertices, qm.mesh.faces, src, panels, lines)], suptitle=title)
+        save_panels(output, [Row(qm.mesh.vertices, qm.mesh.faces, src, panels, lines)], suptitle=title,
+                    size=size, up=up)
     if output:
         click.echo(f"written {output}")
 
@@ -614,7 +623,9 @@ def finetune(files, pretrained, output, sources, held_out, decoder_steps, head_s
               help="textured.png (rendered), or uv.npy ((u, v) per file vertex, NaN outside the disc).")
 @click.option("--prepare", is_flag=True, help="Run the geodata pipeline first (watertight, ~5k vertices).")
 @click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True)
-def texture(files, pretrained, center, radius, squares, compare, output, prepare, device):
+@UP_OPTION
+@SIZE_OPTION
+def texture(files, pretrained, center, radius, squares, compare, output, prepare, device, up, size):
     """Texture MESH around a vertex with the geodesic polar coordinates (discrete log map) that the
     model's distance queries give: a checkerboard decal, its u axis drawn red.
 
@@ -658,7 +669,7 @@ def texture(files, pretrained, center, radius, squares, compare, output, prepare
         from .render import Panel, Row, save_panels
         save_panels(output, [Row(qm.mesh.vertices, qm.mesh.faces, c, [
             Panel(f, title, vmax=2 * radius / squares) for title, f in panels])],
-            suptitle=f"{name}, center {center}, radius {radius:.3g}")
+            suptitle=f"{name}, center {center}, radius {radius:.3g}", size=size, up=up)
     click.echo(f"written {output}")
 
 
