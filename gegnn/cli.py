@@ -37,6 +37,7 @@ def main():
       gegnn pairwise --pretrained mesh.obj -o D.npy
       gegnn finetune --pretrained mesh.obj -o tuned.safetensors
       gegnn texture --pretrained mesh.obj --center 0 -o textured.png
+      gegnn view --pretrained mesh.obj -o view.html
       gegnn shape-distribution --pretrained a.obj b.obj -o d2.png
       torchrun --nproc-per-node 4 -m gegnn.cli train out/ --run-dir runs/a
     """
@@ -318,6 +319,77 @@ def query(files, pretrained, source, pairs_csv, points_file, output, exact, path
                     size=size, up=up)
     if output:
         click.echo(f"written {output}")
+
+
+@main.command(context_settings={"max_content_width": 100})
+@click.argument("files", **MODEL_ARG)
+@click.option("--pretrained", is_flag=True, help=PRETRAINED_HELP)
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="The page (.html).")
+@click.option("--source", "sources", type=int, multiple=True,
+              help="The vertex whose field the page opens with (the file's numbering; repeat for more, e.g. "
+                   "for --exact)  [default: 0]")
+@click.option("--exact", is_flag=True, help="Also the exact fields of the --source vertices: the page shows "
+                                            "predicted, exact and relative error for them.")
+@click.option("--dtype", type=click.Choice(["float32", "float16"]), default="float32", show_default=True,
+              help="Codes in the page (float16: half the size; distances move by ~1e-3 relative).")
+@click.option("--prepare", is_flag=True, help="Run the geodata pipeline first (watertight, remesh to ~5k "
+                                              "vertices: the meshes the model was trained on).")
+@click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True)
+@click.option("--precision", type=click.Choice(["fp32", "bf16"]), default="fp32", show_default=True,
+              help="Network precision (bf16: faster on recent CPUs and GPUs).")
+@UP_OPTION
+def view(files, pretrained, output, sources, exact, dtype, prepare, device, precision, up):
+    """An interactive page of MESH: coloured by the distance field of a vertex, with isolines; click any
+    vertex and the page decodes its field at once from the codes of one forward pass, with the model's own
+    decoder (no server, no network: one self-contained HTML file for any browser or notebook).
+
+    \b
+    Examples:
+      gegnn view --pretrained bunny.obj -o bunny.html
+      gegnn view --pretrained bunny.obj --source 0 --source 1234 --exact -o compare.html
+      gegnn view --pretrained biharmonic bunny.obj -o biharmonic.html
+      gegnn view runs/a/best.safetensors part.obj --dtype float16 -o part.html
+
+    The page holds the mesh and the codes (N x 196 values for the landmark model: 5 MB at 5k vertices,
+    half with --dtype float16). With --prepare it shows the remeshed mesh, numbered as such.
+    """
+    import numpy as np
+
+    from geodata.mesh import MeshError
+
+    from .viewer import view_page
+
+    spec, (mesh_path,) = _model_and_meshes(files, pretrained)
+    _output_suffix(output, (".html", ".htm"))
+    qm = _load_mesh(mesh_path, prepare)
+    sources = sources or (0,)
+    try:
+        net_sources = [int(qm.vertices(s)) for s in sources]
+    except ValueError as exc:
+        raise click.ClickException(f"{mesh_path}: {exc}") from None
+    config = _model_config(spec, pretrained)
+    fields = {}
+    if exact:
+        from .query import exact_fields
+        try:
+            fields = dict(zip(net_sources, exact_fields(qm.mesh, np.array(net_sources), config.distance)))
+        except MeshError as exc:
+            raise click.ClickException(f"{mesh_path}: --exact: {exc.reason}") from None
+    emb = _load_model(spec, pretrained, device).embed(qm.mesh.vertices, qm.mesh.faces, precision=precision)
+    file_index = None
+    if not prepare:  # the smallest file vertex of each mesh vertex
+        used = np.flatnonzero(qm.to_mesh >= 0)[::-1]
+        file_index = np.full(len(qm.mesh.vertices), -1, dtype=np.int64)
+        file_index[qm.to_mesh[used]] = used
+    name = Path(mesh_path).name
+    model = f"--pretrained {spec or next(iter(PRETRAINED))}" if pretrained else Path(spec).name
+    page = view_page(emb, title=f"{name}: {config.distance} distance predicted by GeGnn",
+                     meta=f"{len(qm.mesh.vertices):,} vertices, {len(qm.mesh.faces):,} faces"
+                          + (" (remeshed by --prepare)" if prepare else "") + f"; model {model}; distances in the "
+                          "mesh's units", sources=net_sources, exact=fields, file_index=file_index, up=up, dtype=dtype)
+    Path(output).write_text(page, encoding="utf-8")
+    click.echo(f"{name}: {len(qm.mesh.vertices):,} vertices; written {output} ({len(page) / 2 ** 20:.1f} MB): "
+               "open it in a browser")
 
 
 @main.command(context_settings={"max_content_width": 100})

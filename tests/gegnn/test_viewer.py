@@ -1,0 +1,174 @@
+"""gegnn view: the page is self-contained, its own decoder gives Embedding's distances, and in a real browser
+(headless Chromium, Debian's package, driven by Playwright) it draws the mesh and a click changes the field."""
+from __future__ import annotations
+
+import os
+import re
+import shutil
+
+import numpy as np
+import pytest
+
+from geodata.examples import bumpy_sphere
+from geodata.mesh import Mesh, vertex_components
+from gegnn.model import GeGnn
+from gegnn.viewer import view_page
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+        "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+
+
+def two_parts() -> Mesh:
+    """An irregular closed surface of ~600 vertices and a smaller one beside it (two parts)."""
+    a, b = bumpy_sphere(600, seed=1), bumpy_sphere(120, seed=2, offset=(3.0, 0.0, 0.0))
+    return Mesh(np.concatenate([a.vertices, b.vertices]), np.concatenate([a.faces, b.faces + len(a.vertices)]))
+
+
+@pytest.fixture(scope="module")
+def mesh():
+    return two_parts()
+
+
+@pytest.fixture(scope="module")
+def embeddings(mesh):
+    return {name: GeGnn.pretrained(name).embed(mesh.vertices, mesh.faces, precision="fp32")
+            for name in ("landmark", "paper", "biharmonic")}
+
+
+@pytest.fixture(scope="module")
+def browser():
+    try:
+        from playwright.sync_api import sync_playwright
+    except ImportError:
+        sync_playwright = None
+    if CHROMIUM is None or sync_playwright is None:
+        message = "headless Chromium (Debian: chromium) and playwright are needed for the browser tests"
+        if os.environ.get("CI"):
+            pytest.fail(message + ": .ci/run installs them")
+        pytest.skip(message)
+    with sync_playwright() as p:
+        chromium = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
+        yield chromium
+        chromium.close()
+
+
+def open_page(browser, tmp_path, text: str):
+    path = tmp_path / "view.html"
+    path.write_text(text, encoding="utf-8")
+    page = browser.new_page(viewport={"width": 900, "height": 700})
+    errors = []
+    page.on("pageerror", lambda exc: errors.append(str(exc)))
+    page.goto(path.as_uri())
+    page.wait_for_function("document.body.dataset.frames >= 1", timeout=60_000)
+    assert not errors
+    return page
+
+
+def expected_field(emb, mesh, source) -> np.ndarray:
+    """Embedding's field, NaN off the source's part (as gegnn query and the page)."""
+    labels = vertex_components(mesh)
+    return np.where(labels == labels[source], emb.field(source), np.nan)
+
+
+def test_the_page_is_self_contained(embeddings):
+    text = view_page(embeddings["landmark"], title="<two parts>", sources=[3])
+    assert not re.search(r"""(src|href)\s*=\s*["']?[a-z]*:?//""", text)  # nothing loaded from anywhere
+    assert "&lt;two parts&gt;" in text and "<two parts>" not in text  # the title is escaped
+
+
+@pytest.mark.parametrize("name", ["landmark", "paper", "biharmonic"])
+def test_the_pages_decoder_gives_embeddings_distances(browser, tmp_path, embeddings, mesh, name):
+    emb = embeddings[name]
+    page = open_page(browser, tmp_path, view_page(emb, title=name, sources=[5]))
+    for source in (5, 400, len(mesh.vertices) - 1):  # the last vertex is on the small part
+        in_page = np.array(page.evaluate(f"gegnn.field({source})"), dtype=float)
+        np.testing.assert_allclose(in_page, expected_field(emb, mesh, source), rtol=2e-5, atol=1e-6 * emb.scale)
+    page.close()
+
+
+def test_float16_codes_stay_within_a_thousandth(browser, tmp_path, embeddings, mesh):
+    emb = embeddings["landmark"]
+    page = open_page(browser, tmp_path, view_page(emb, title="half", dtype="float16"))
+    in_page = np.array(page.evaluate("gegnn.field(7)"), dtype=float)
+    truth = expected_field(emb, mesh, 7)
+    far = truth > 0.1 * np.nanmax(truth)
+    assert np.nanmedian(np.abs(in_page[far] / truth[far] - 1)) < 1e-3
+    page.close()
+
+
+def canvas_pixels(page) -> np.ndarray:
+    """The canvas as the browser shows it, RGB 0-255 (H, W, 3)."""
+    from io import BytesIO
+
+    from matplotlib.image import imread
+    return np.round(imread(BytesIO(page.locator("#gegnn-canvas").screenshot()), format="png")[..., :3] * 255)
+
+
+def test_a_click_shows_the_clicked_vertexs_field(browser, tmp_path, embeddings, mesh):
+    emb = embeddings["landmark"]
+    page = open_page(browser, tmp_path, view_page(emb, title="click", sources=[0]))
+    before = canvas_pixels(page)
+    drawn = (before < 250).any(axis=2)
+    assert drawn.mean() > 0.05  # the mesh is on the canvas, not a blank page
+    assert len(np.unique(before[drawn] // 8, axis=0)) > 50  # coloured by a field, shaded
+    box = page.locator("#gegnn-canvas").bounding_box()
+    x, y = box["x"] + box["width"] * 0.45, box["y"] + box["height"] * 0.5
+    target = page.evaluate(f"gegnn.pick({x}, {y})")
+    assert target >= 0 and target != 0
+    frames = int(page.evaluate("document.body.dataset.frames"))
+    page.mouse.click(x, y)
+    page.wait_for_function(f"document.body.dataset.frames > {frames}")
+    assert page.evaluate("gegnn.source()") == target
+    shown = np.array(page.evaluate("gegnn.shown()"), dtype=float)
+    np.testing.assert_allclose(shown, expected_field(emb, mesh, target), rtol=2e-5, atol=1e-6 * emb.scale)
+    after = canvas_pixels(page)
+    assert (np.abs(after - before).sum(axis=2) > 30).mean() > 0.02  # the picture changed
+    assert f"vertex {target}" in page.inner_text("#gegnn-source")
+    page.close()
+
+
+def test_exact_fields_and_their_error(browser, tmp_path, embeddings, mesh):
+    emb = embeddings["landmark"]
+    predicted = expected_field(emb, mesh, 0)
+    exact = predicted * 1.1  # any field: the page shows what it is given
+    page = open_page(browser, tmp_path, view_page(emb, title="exact", sources=[0], exact={0: exact}))
+    truth = np.abs(predicted - exact) / (exact + 1e-3 * emb.scale)  # gegnn.query.relative_errors
+    truth[0] = 0
+    mre = np.nanmean(truth[1:])
+    assert f"mean relative error vs exact {100 * mre:.2f}%" in page.inner_text("#gegnn-source")
+    page.check("input[value=exact]")
+    np.testing.assert_allclose(np.array(page.evaluate("gegnn.shown()"), dtype=float), exact, rtol=1e-6)
+    page.check("input[value=error]")
+    np.testing.assert_allclose(np.array(page.evaluate("gegnn.shown()"), dtype=float), truth, rtol=1e-4)
+    page.close()
+
+
+def test_gegnn_view_numbers_vertices_as_the_file_does(browser, tmp_path):
+    """A file whose vertex 0 is used by no face: the mesh drops it, the page still says the file's numbers."""
+    import base64
+    import json
+
+    from click.testing import CliRunner
+
+    from gegnn.cli import main
+
+    part = bumpy_sphere(300, seed=3)
+    lines = ["v 9 9 9"] + [f"v {x} {y} {z}" for x, y, z in part.vertices]
+    lines += [f"f {a + 2} {b + 2} {c + 2}" for a, b, c in part.faces]
+    (tmp_path / "m.obj").write_text("\n".join(lines) + "\n")
+    result = CliRunner().invoke(main, ["view", "--pretrained", str(tmp_path / "m.obj"), "--source", "3", "--source",
+                                       "10", "--exact", "-o", str(tmp_path / "v.html")])
+    assert result.exit_code == 0, result.output
+    assert "written" in result.output and "MB" in result.output
+    text = (tmp_path / "v.html").read_text()
+    data = json.loads(re.search(r'<script id="gegnn-data" type="application/json">(.*?)</script>', text).group(1))
+    file_index = np.frombuffer(base64.b64decode(data["file_index"]["data"]), dtype="<i4")
+    assert len(file_index) == 300 and file_index[data["sources"]].tolist() == [3, 10]  # the file's numbers
+    assert sorted(map(int, data["exact"])) == sorted(data["sources"])
+    page = browser.new_page()
+    page.goto((tmp_path / "v.html").as_uri())
+    page.wait_for_function("document.body.dataset.frames >= 1", timeout=60_000)
+    assert "source: vertex 3 ·" in page.inner_text("#gegnn-source")
+    assert "mean relative error vs exact" in page.inner_text("#gegnn-source")
+    page.close()
