@@ -113,23 +113,26 @@ def _solve_all(mesh: Mesh, sources: list[int], distance: str) -> np.ndarray:
     return np.stack([solve(s) for s in sources])
 
 
-# Vertex counts over which a model's accuracy was measured (docs/applications.md, "Scalability and
-# convergence": the landmark model at 1.0-1.2% on validation meshes of 5k-80k vertices and 0.5-0.7% on
-# spheres of 1k-100k; the paper model drifts, 9.8% at 5k to 11.3% at 80k and 16% on a 1k sphere; the
-# biharmonic model was measured at ~5k only).
-MEASURED_VERTICES = {"landmark": (1000, 100_000), "paper": (2000, 20_000), "spectral": (4000, 6000)}
+# Where the accuracy of each kind of model is known to hold (by the fields it reads), and what was measured
+# of the shipped one (docs/applications.md, "Scalability and convergence"; biharmonic: docs/model-card.md).
+RESOLUTION = {
+    "landmark": (1000, 100_000, "the shipped landmark model was measured from 1,000 to 100,000 vertices "
+                                "(1.0-1.2% on the validation meshes at 5k-80k, 0.5-0.7% on spheres of 1k-100k)"),
+    "paper": (2000, 20_000, "the shipped paper model's error grows away from the ~5k vertices it was trained on "
+                            "(9.8% at 5k, 11.3% at 80k, 16% on a sphere of 1k)"),
+    "spectral": (4000, 6000, "the shipped biharmonic model was measured on meshes of ~5k vertices only"),
+}
 
 
 def resolution_note(n_vertices: int, config) -> str | None:
-    """A word for a mesh outside the vertex counts where the model's accuracy was measured (by the
-    fields the model reads: landmark, spectral, or none for the paper model)."""
+    """A word for a mesh outside the vertex counts where the model's accuracy is known to hold (by the
+    fields the model reads: landmark, spectral, or none for the paper model), saying what was measured."""
     spec = FieldSpec.of(config)
-    low, high = MEASURED_VERTICES[spec.kind if spec else "paper"]
+    low, high, measured = RESOLUTION[spec.kind if spec else "paper"]
     if low <= n_vertices <= high:
         return None
-    return (f"{n_vertices} vertices, {'fewer' if n_vertices < low else 'more'} than the {low:,}-{high:,} over which "
-            f"this model's accuracy was measured (docs/applications.md); --prepare remeshes to ~5k first "
-            "(results are carried back to this file's vertices)")
+    return (f"{n_vertices:,} vertices: {measured}; --prepare remeshes to ~5k first (results are carried back to "
+            "this file's vertices)")
 
 
 def source_part(mesh: Mesh, source: int) -> tuple[np.ndarray, int]:

@@ -1,7 +1,10 @@
 """Stage 1, load: bytes of a mesh file to a validated, cleaned triangle mesh."""
 from __future__ import annotations
 
+import contextlib
 import io
+import logging
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +25,28 @@ def load_mesh_file(path) -> tuple[Mesh, np.ndarray]:
     return load_mesh_bytes(Path(path).read_bytes(), Path(path).suffix, return_map=True)
 
 
+class _AsWarning(logging.Handler):
+    def emit(self, record: logging.LogRecord) -> None:
+        warnings.warn(f"trimesh: {record.getMessage()}", stacklevel=1)
+
+
+@contextlib.contextmanager
+def _library_log_as_warnings():
+    """trimesh logs what it skips in a file at WARNING with a traceback (e.g. "failed to extract
+    face_normals" of an ASCII STL whose normals do not parse: normals are recomputed anyway), which an
+    unconfigured program prints whole. Here each becomes one Python warning, without the traceback:
+    geodata prepare records it with the mesh's warnings, a command prints one line."""
+    log = logging.getLogger("trimesh")
+    handler, propagate = _AsWarning(logging.WARNING), log.propagate
+    log.addHandler(handler)
+    log.propagate = False
+    try:
+        yield
+    finally:
+        log.removeHandler(handler)
+        log.propagate = propagate
+
+
 def load_mesh_bytes(data: bytes, suffix: str, return_map: bool = False):
     """Parse a mesh file's bytes (format from `suffix`), validate it and clean it.
 
@@ -38,8 +63,9 @@ def load_mesh_bytes(data: bytes, suffix: str, return_map: bool = False):
         # process=False: keep the file's indices so validation sees what the file really says;
         # maintain_order: an OBJ's vertices are not split at texture or normal seams, so vertex k of
         # the result is the file's k-th `v` line.
-        loaded = trimesh.load(io.BytesIO(parsed), file_type=suffix.lstrip(".").lower(), process=False,
-                              force="mesh", maintain_order=True)
+        with _library_log_as_warnings():
+            loaded = trimesh.load(io.BytesIO(parsed), file_type=suffix.lstrip(".").lower(), process=False,
+                                  force="mesh", maintain_order=True)
     except Exception as exc:  # trimesh raises many types for garbage input
         raise MeshError("load", explain(data, suffix) or _unreadable(exc, suffix)) from None
     if not isinstance(loaded, trimesh.Trimesh):

@@ -143,7 +143,7 @@ def test_coarse_mesh_gets_a_resolution_note(ckpt, tmp_path):
     path = tmp_path / "box.obj"
     trimesh.creation.box().export(path)
     result = CliRunner().invoke(main, ["query", ckpt, str(path), "--source", "0"])
-    assert result.exit_code == 0 and "note: 8 vertices, fewer than the 2,000-20,000 over which" in result.output
+    assert result.exit_code == 0 and "note: 8 vertices: the shipped paper model's error grows away from the ~5k" in result.output
     assert "--prepare remeshes" in result.output
 
 
@@ -153,8 +153,8 @@ def test_resolution_note_follows_the_measurements():
     from gegnn.query import resolution_note
 
     assert resolution_note(80_000, GeGnn.pretrained().config) is None
-    assert "more than the 2,000-20,000" in resolution_note(80_000, GeGnn.pretrained("paper").config)
-    assert "fewer than the 1,000-100,000" in resolution_note(500, GeGnn.pretrained().config)
+    assert "11.3% at 80k" in resolution_note(80_000, GeGnn.pretrained("paper").config)
+    assert "measured from 1,000 to 100,000 vertices" in resolution_note(500, GeGnn.pretrained().config)
 
 
 def test_pairwise_matrix_in_file_numbering_exact_and_heat(soup, ckpt, tmp_path):
