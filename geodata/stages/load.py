@@ -35,7 +35,7 @@ def _library_log_as_warnings():
     """trimesh logs what it skips in a file at WARNING with a traceback (e.g. "failed to extract
     face_normals" of an ASCII STL whose normals do not parse: normals are recomputed anyway), which an
     unconfigured program prints whole. Here each becomes one Python warning, without the traceback:
-    geodata prepare records it with the mesh's warnings, a command prints one line."""
+    geodata prepare writes each distinct one to its --log file, a command prints one line."""
     log = logging.getLogger("trimesh")
     handler, propagate = _AsWarning(logging.WARNING), log.propagate
     log.addHandler(handler)
