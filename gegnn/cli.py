@@ -15,6 +15,11 @@ MODEL_ARG = dict(nargs=-1, required=True, type=click.Path(dir_okay=False), metav
 UP_OPTION = click.option("--up", type=click.Choice(["auto", *UP_AXES]), default="auto", show_default=True,
                          callback=lambda ctx, param, value: None if value == "auto" else value,
                          help="The mesh's up axis in pictures (auto: +y or +z, by how the mesh stands).")
+PREPARE_OPTION = click.option("--prepare", is_flag=True, help="Run the geodata pipeline first (watertight, remesh "
+                              "to ~5k vertices: the meshes the model was trained on).")
+DEVICE_OPTION = click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True)
+PRECISION_OPTION = click.option("--precision", type=click.Choice(["fp32", "bf16"]), default="fp32", show_default=True,
+                                help="Network precision (bf16: faster on recent CPUs and GPUs).")
 SIZE_OPTION = click.option("--size", default=480, show_default=True, help="Pixels across a rendered mesh (PNG).")
 PRETRAINED_HELP = ("Use a model shipped in the package instead of CHECKPOINT: the most accurate one, or NAME "
                    f"({', '.join(repr(name) for name in PRETRAINED)}).")
@@ -82,7 +87,7 @@ def _blocks(ctx, param, value):
               help="Validate on every mesh of this store instead (train on all of STORE).")
 @click.option("--no-rotate", is_flag=True, help="Disable random-rotation augmentation.")
 @click.option("--seed", default=0, show_default=True)
-@click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True)
+@DEVICE_OPTION
 @click.option("--workers", callback=_workers, default="auto", show_default=True, metavar="N|auto",
               help="Loader processes per process building batches (0: in the training process). auto: on a "
                    "GPU one per spare CPU core, at most 8 (one GPU needs about 5-6 at batch 4: docs/gpu.md); "
@@ -153,7 +158,7 @@ def train(store, run_dir, epochs, batch_size, lr, weight_decay, warmup_epochs, c
 @click.argument("store", type=click.Path(exists=True, file_okay=False))
 @click.option("--distance", type=click.Choice(["geodesic", "biharmonic"]),
               help="Which stored distances to compare with (default: those the model was trained on).")
-@click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True)
+@DEVICE_OPTION
 @click.option("--csv", "csv_path", type=click.Path(dir_okay=False), help="Also write the table as CSV.")
 def evaluate(checkpoint, store, distance, device, csv_path):
     """Mean relative error of CHECKPOINT on every mesh of STORE (all stored pairs), and overall."""
@@ -198,11 +203,9 @@ def evaluate(checkpoint, store, distance, device, csv_path):
 @click.option("--path", "path_to", type=int, metavar="J",
               help="Trace the geodesic path from --source to vertex J on the predicted field (a PNG draws "
                    "it); with --exact also potpourri3d's exact edge-flip path, and the lengths of both.")
-@click.option("--prepare", is_flag=True, help="Run the geodata pipeline first (watertight, remesh to ~5k "
-                                              "vertices: the meshes the model was trained on).")
-@click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True)
-@click.option("--precision", type=click.Choice(["fp32", "bf16"]), default="fp32", show_default=True,
-              help="Network precision (bf16: faster on recent CPUs and GPUs).")
+@PREPARE_OPTION
+@DEVICE_OPTION
+@PRECISION_OPTION
 @UP_OPTION
 @SIZE_OPTION
 def query(files, pretrained, source, pairs_csv, points_file, output, exact, path_to, prepare, device, precision, up,
@@ -332,11 +335,9 @@ def query(files, pretrained, source, pairs_csv, points_file, output, exact, path
                                             "predicted, exact and relative error for them.")
 @click.option("--dtype", type=click.Choice(["float32", "float16"]), default="float32", show_default=True,
               help="Codes in the page (float16: half the size; distances move by ~1e-3 relative).")
-@click.option("--prepare", is_flag=True, help="Run the geodata pipeline first (watertight, remesh to ~5k "
-                                              "vertices: the meshes the model was trained on).")
-@click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True)
-@click.option("--precision", type=click.Choice(["fp32", "bf16"]), default="fp32", show_default=True,
-              help="Network precision (bf16: faster on recent CPUs and GPUs).")
+@PREPARE_OPTION
+@DEVICE_OPTION
+@PRECISION_OPTION
 @UP_OPTION
 def view(files, pretrained, output, sources, exact, dtype, prepare, device, precision, up):
     """An interactive page of MESH: coloured by the distance field of a vertex, with isolines; click any
@@ -409,7 +410,7 @@ def view(files, pretrained, output, sources, exact, dtype, prepare, device, prec
 @click.option("--jobs", default=0, show_default=True, help="Threads of --exact (0: every core).")
 @click.option("--prepare", is_flag=True, help="Run the geodata pipeline first (watertight, remesh to ~5k "
                                               "vertices); rows and columns stay the file's vertices.")
-@click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True)
+@DEVICE_OPTION
 @click.option("--precision", type=click.Choice(["fp32", "bf16"]), default="fp32", show_default=True,
               help="Network and decoder precision (bf16: faster on recent CPUs and GPUs).")
 def pairwise(files, pretrained, output, rows_file, dtype, exact, heat, jobs, prepare, device, precision):
@@ -637,7 +638,7 @@ def _paths(emb, qm, src, dst, path_to, exact_d, name) -> list:
 @click.option("--prepare", is_flag=True, help="Run the geodata pipeline first (watertight, ~5k vertices); the "
                                               "model is then tuned to the prepared mesh.")
 @click.option("--seed", default=0, show_default=True, help="Seed of the source choice and the pair sampling.")
-@click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True)
+@DEVICE_OPTION
 def finetune(files, pretrained, output, sources, held_out, decoder_steps, head_steps, steps, head_lr, lr,
              pairs_per_step, prepare, seed, device):
     """Finetune CHECKPOINT (or --pretrained) on the one mesh MESH: exact distances from --sources random
@@ -694,7 +695,7 @@ def finetune(files, pretrained, output, sources, held_out, decoder_steps, head_s
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
               help="textured.png (rendered), or uv.npy ((u, v) per file vertex, NaN outside the disc).")
 @click.option("--prepare", is_flag=True, help="Run the geodata pipeline first (watertight, ~5k vertices).")
-@click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True)
+@DEVICE_OPTION
 @UP_OPTION
 @SIZE_OPTION
 def texture(files, pretrained, center, radius, squares, compare, output, prepare, device, up, size):
@@ -754,7 +755,7 @@ def texture(files, pretrained, center, radius, squares, compare, output, prepare
 @click.option("--seed", default=0, show_default=True)
 @click.option("-o", "--output", type=click.Path(dir_okay=False),
               help="d2.png (geodesic and Euclidean histograms), or d2.csv (the densities).")
-@click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True)
+@DEVICE_OPTION
 def shape_distribution(files, pretrained, pairs, bins, seed, output, device):
     """Shape distributions (D2, Osada et al. 2002) of each MESH with predicted geodesic distances, next to
     the Euclidean ones: histograms of the distance between random surface points (of a mesh's largest
