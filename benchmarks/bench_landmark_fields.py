@@ -22,7 +22,7 @@ import numpy as np
 import trimesh
 
 from gegnn.heat import HeatDistance
-from gegnn.landmarks import T_COEF, _farthest, _farthest_point_fields, landmark_fields
+from gegnn.landmarks import T_COEF, _farthest, farthest_point_fields, landmark_fields
 
 DRAGON = "data/val.zarr/meshes/dragon-4af53808"
 
@@ -58,11 +58,11 @@ def potpourri3d_fps(v, f, k, first):
     import potpourri3d as pp3d
 
     solver = pp3d.MeshHeatMethodDistanceSolver(v, f, t_coef=T_COEF, use_robust=True)
-    return _farthest_point_fields(solver.compute_distance, len(v), k, first)
+    return farthest_point_fields(solver.compute_distance, len(v), k, first)
 
 
 def heat_fps(v, f, k, first):
-    return _farthest_point_fields(HeatDistance(v, f, T_COEF).distance, len(v), k, first)
+    return farthest_point_fields(HeatDistance(v, f, T_COEF).distance, len(v), k, first)
 
 
 def batched_fps(v, f, k, first, batch):

@@ -126,11 +126,15 @@ def _blocks(ctx, param, value):
                    "decoder on an --init network; ~10 ms a step on CPU against ~3 s for a network step).")
 @click.option("--landmark-output", type=click.Choice(["ratio", "interval"]), default="ratio", show_default=True,
               help="d = L exp(MLP), or (ablation) d = L + (U - L) sigmoid(MLP); L, U: the landmark bounds.")
+@click.option("--points", default=0, show_default=True, metavar="K",
+              help="Point-cloud model: each mesh's vertices are read as a cloud (faces unused): graph of the K "
+                   "nearest neighbours, estimated normals, point-cloud heat-method landmark fields (0: meshes). "
+                   "With --init, a mesh model's weights start it.")
 def train(store, run_dir, epochs, batch_size, lr, weight_decay, warmup_epochs, clip_grad, distance,
           pairs_per_mesh, val_fraction, val_store, no_rotate, seed, device, workers, resume, deterministic,
           field_cache, init_ckpt, channels, blocks, aggr, no_edge_length, no_relative_position, plain_grid_pool,
           euclidean_decoder, landmarks, landmark_no_embedding, landmark_no_euclidean, spectral,
-          spectral_no_embedding, decoder_warmup, landmark_output):
+          spectral_no_embedding, decoder_warmup, landmark_output, points):
     """Train GeGnn on the geodata store STORE."""
     from .train import TrainConfig, train as run_training
 
@@ -149,7 +153,7 @@ def train(store, run_dir, epochs, batch_size, lr, weight_decay, warmup_epochs, c
                             decoder="euclidean" if euclidean_decoder else "mlp", landmarks=landmarks,
                             landmark_embedding=not landmark_no_embedding,
                             landmark_euclidean=not landmark_no_euclidean, landmark_output=landmark_output,
-                            spectral=spectral, spectral_embedding=not spectral_no_embedding, **extra)
+                            spectral=spectral, spectral_embedding=not spectral_no_embedding, points=points, **extra)
     run_training(cfg, model_cfg)
 
 

@@ -181,12 +181,14 @@ class BatchDataset(torch.utils.data.Dataset):
             augmentation; validation uses seed 0, as ``GeGnn.embed`` does.
         field_cache: a :class:`gegnn.fields.FieldCache` path the fields are read from (training fills it
             first); fields missing there, or without a cache, are computed per use.
+        cloud: for a point-cloud model, k: each mesh's vertices are read as a point cloud, its graph and
+            normals made from them alone (:func:`gegnn.pointcloud.cloud_graph`); 0: the mesh's own.
     """
 
     def __init__(self, store_path, distance, seed, num_pairs, rotate, levels, sigma_c, sigma_n,
-                 fields: FieldSpec | None = None, field_cache: str | None = None):
+                 fields: FieldSpec | None = None, field_cache: str | None = None, cloud: int = 0):
         self.store_path, self.distance, self.seed = str(store_path), distance, seed
-        self.num_pairs, self.rotate, self.fields = num_pairs, rotate, fields
+        self.num_pairs, self.rotate, self.fields, self.cloud = num_pairs, rotate, fields, cloud
         self.levels, self.sigma_c, self.sigma_n = levels, sigma_c, sigma_n
         self.field_cache = field_cache
         self._store, self._geometries, self._cache = None, {}, None
@@ -216,9 +218,15 @@ class BatchDataset(torch.utils.data.Dataset):
         return 0 if epoch == VAL_EPOCH else int(rng.integers(self.fields.draws))
 
     def geometry(self, mesh_id: str) -> MeshGeometry:
-        """The mesh's geometry, kept: ~200 kB per 5k-vertex mesh; pairs (~7 MB) are read per use."""
+        """The mesh's geometry, kept: ~200 kB per 5k-vertex mesh; pairs (~7 MB) are read per use. For a
+        point-cloud model, the graph and normals of its vertices alone (faces kept: the field cache's key)."""
         if mesh_id not in self._geometries:
-            self._geometries[mesh_id] = self.store.geometry(mesh_id)
+            g = self.store.geometry(mesh_id)
+            if self.cloud:
+                from .pointcloud import cloud_graph
+                c = cloud_graph(g.vertices.astype(np.float64), self.cloud)
+                g = MeshGeometry(g.vertices, c.normals.astype(np.float32), c.edges, g.faces)
+            self._geometries[mesh_id] = g
         return self._geometries[mesh_id]
 
     def mesh_fields(self, mesh_id: str, seed: int) -> np.ndarray:

@@ -41,16 +41,19 @@ LANDMARK_DRAWS = 4  # landmark choices per training mesh (augmentation; each com
 @dataclass(frozen=True)
 class FieldSpec:
     """Which fields: ``"landmark"`` (K heat-method landmark distance fields per component) or
-    ``"spectral"`` (m spectral modes and the tail scale), and K or m."""
+    ``"spectral"`` (m spectral modes and the tail scale), and K or m; ``cloud``: the k of a point-cloud
+    model's neighbour graph, whose landmark fields come from the points alone (:mod:`gegnn.pointcloud`),
+    0 for a mesh model."""
 
     kind: str
     size: int
+    cloud: int = 0
 
     @classmethod
     def of(cls, config) -> "FieldSpec | None":
         """The fields a :class:`gegnn.GeGnnConfig` asks for (None for the paper's model)."""
         if config.landmarks:
-            return cls("landmark", config.landmarks)
+            return cls("landmark", config.landmarks, config.points)
         return cls("spectral", config.spectral) if config.spectral else None
 
     @property
@@ -65,10 +68,17 @@ class FieldSpec:
 
     @property
     def name(self) -> str:
-        return f"k{self.size}" if self.kind == "landmark" else f"spectral{self.size}"
+        if self.kind == "spectral":
+            return f"spectral{self.size}"
+        return f"k{self.size}" + (f"-cloud{self.cloud}" if self.cloud else "")
 
     def compute(self, vertices: np.ndarray, faces: np.ndarray, seed: int = 0) -> np.ndarray:
-        """The fields of one mesh, float32 (N, K) or (N, m + 1)."""
+        """The fields of one mesh, float32 (N, K) or (N, m + 1); of its vertices as a point cloud (faces
+        unused) for a point-cloud model."""
+        if self.cloud:
+            from .pointcloud import cloud_landmark_fields, graph_parts, knn_edges
+            part = graph_parts(len(vertices), knn_edges(vertices, self.cloud)[0])
+            return cloud_landmark_fields(vertices, part, self.size, seed).distances
         if self.kind == "landmark":
             return landmark_fields(vertices, faces, self.size, seed).distances
         return spectral_codes(vertices, faces, self.size)

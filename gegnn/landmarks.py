@@ -32,7 +32,7 @@ from geodata.mesh import Mesh, label_groups, vertex_components
 
 from .heat import HeatDistance
 
-__all__ = ["LandmarkFields", "landmark_fields", "T_COEF"]
+__all__ = ["LandmarkFields", "landmark_fields", "farthest_point_fields", "T_COEF"]
 
 T_COEF = 0.5
 TIE = 1e-9  # farthest-point ties: relative to the largest distance
@@ -101,7 +101,7 @@ def landmark_fields(vertices, faces, k: int, seed: int = 0, t_coef: float = T_CO
             continue
         n_fields = min(k, len(idx))
         field = _heat_field(mesh.vertices[idx], sub_faces, t_coef, n_fields)
-        chosen, fields = _farthest_point_fields(field, len(idx), n_fields, int(rng.integers(len(idx))))
+        chosen, fields = farthest_point_fields(field, len(idx), n_fields, int(rng.integers(len(idx))))
         cols = np.arange(k) % len(chosen)  # fewer vertices than K: repeat
         out[idx] = fields[:, cols]
         landmarks[c] = idx[np.asarray(chosen)[cols]]
@@ -125,7 +125,7 @@ def _heat_field(vertices, faces, t_coef: float, fields: int):
     return pp3d.MeshHeatMethodDistanceSolver(vertices, faces, t_coef=t_coef, use_robust=True).compute_distance
 
 
-def _farthest_point_fields(field, n: int, k: int, first: int) -> tuple[list[int], np.ndarray]:
+def farthest_point_fields(field, n: int, k: int, first: int) -> tuple[list[int], np.ndarray]:
     fields = np.empty((k, n), dtype=np.float32)  # a row a field: contiguous writes
     nearest = np.full(n, np.inf)
     chosen = [first]

@@ -63,6 +63,9 @@ class GeGnnConfig:
     spectral: int = 0
     spectral_embedding: bool = True           # the correction reads the embedding difference
     distance: str = "geodesic"                # what the model was trained to predict: "geodesic" | "biharmonic"
+    # Point clouds (0 = meshes): the graph joins every point to its k nearest neighbours, the normals are
+    # estimated and the landmark fields come from the points alone (gegnn.pointcloud).
+    points: int = 0
 
     def __post_init__(self):
         object.__setattr__(self, "encoder_blocks", tuple(self.encoder_blocks))
@@ -81,6 +84,8 @@ class GeGnnConfig:
             raise ValueError(f"distance must be 'geodesic' or 'biharmonic', got {self.distance!r}")
         if self.landmarks and self.spectral:
             raise ValueError("a model reads landmark fields (geodesic) or spectral codes (biharmonic), not both")
+        if self.points < 0 or (self.points and self.spectral):
+            raise ValueError(f"points must be >= 0 and takes no spectral codes, got {self.points}")
 
     @property
     def levels(self) -> int:
@@ -182,14 +187,18 @@ class GeGnn(nn.Module):
 
     # -- inference on raw meshes -----------------------------------------------------------------------
     @torch.inference_mode()
-    def embed(self, vertices: np.ndarray, faces: np.ndarray, device=None, precision: str = "fp32"):
-        """Embed one mesh given as NumPy arrays in any units (one forward pass).
+    def embed(self, vertices: np.ndarray, faces: np.ndarray | None = None, device=None, precision: str = "fp32",
+              normals: np.ndarray | None = None):
+        """Embed one mesh, or for a point-cloud model (``config.points``) one point cloud, given as NumPy
+        arrays in any units (one forward pass).
 
         Vertices are normalized here (bounding box centered, longest half-extent 1, as in training);
-        normals and edges are computed here; distances from the result are in the input's units.
-        ``device`` (default: where the model is) moves the model there, as ``model.to(device)`` would,
-        and the embedding lives there. ``precision="bf16"`` runs the network under bf16 autocast: ~2x
-        faster on CPUs with AVX512-BF16, embeddings within ~1% (relative norm) of fp32.
+        normals and edges are computed here (a cloud's normals may be given instead); distances from the
+        result are in the input's units, between the input's vertices (a cloud's duplicate points share
+        their codes). ``device`` (default: where the model is) moves the model there, as
+        ``model.to(device)`` would, and the embedding lives there. ``precision="bf16"`` runs the network
+        under bf16 autocast: ~2x faster on CPUs with AVX512-BF16, embeddings within ~1% (relative norm)
+        of fp32.
 
         Returns:
             :class:`gegnn.embedding.Embedding`
@@ -201,13 +210,23 @@ class GeGnn(nn.Module):
         if device is not None:
             self.to(device)
         device = next(self.parameters()).device
-        h, fields, scale = self.inputs(vertices, faces, device)  # validates them
+        if self.config.points:
+            if faces is not None:
+                raise ValueError("a point-cloud model takes points only (faces=None)")
+            h, fields, scale, expand = self.cloud_inputs(vertices, normals, device)
+        else:
+            if faces is None:
+                raise ValueError("this model embeds meshes: give faces, or use a point-cloud model "
+                                 "(GeGnn.pretrained('points'))")
+            (h, fields, scale), expand = self.inputs(vertices, faces, device), None
         was_training = self.training
         self.eval()
         autocast = torch.autocast(device.type, dtype=torch.bfloat16) if precision == "bf16" else nullcontext()
         with autocast, torch.inference_mode():
             codes = self(h, fields=fields).float()
         self.train(was_training)
+        if expand is not None:
+            codes = codes[torch.as_tensor(expand, device=device)]
         return Embedding(codes, self.distance, scale, vertices=vertices, faces=faces)
 
     def inputs(self, vertices: np.ndarray, faces: np.ndarray, device) -> tuple[Hierarchy, Tensor | None, float]:
@@ -222,6 +241,33 @@ class GeGnn(nn.Module):
         spec = FieldSpec.of(self.config)
         fields = None if spec is None else torch.as_tensor(spec.compute(mesh.vertices, mesh.faces), device=device)
         return self.hierarchy(graph).to(device), fields, scale
+
+    def cloud_inputs(self, points: np.ndarray, normals: np.ndarray | None, device):
+        """What a point-cloud model reads for one cloud in any units (:mod:`gegnn.pointcloud`): the
+        hierarchy of its distinct points, normalized, their landmark fields, the scale back to the input's
+        units, and the distinct point of every input point (N,)."""
+        from .pointcloud import cloud_graph, cloud_landmark_fields
+
+        points = np.asarray(points, dtype=np.float64)
+        if points.ndim != 2 or points.shape[1] != 3 or not np.isfinite(points).all():
+            raise ValueError(f"points must be a finite (N, 3) array, got shape {points.shape}")
+        distinct, first, expand = np.unique(points, axis=0, return_index=True, return_inverse=True)
+        if len(distinct) <= self.config.points:
+            raise ValueError(f"{len(distinct)} distinct points: a cloud needs more than the {self.config.points} "
+                             "neighbours each point's graph edges come from")
+        if normals is not None:
+            normals = np.asarray(normals, dtype=np.float64)
+            if normals.shape != points.shape or not np.isfinite(normals).all():
+                raise ValueError(f"normals must be a finite array of the points' shape {points.shape}")
+            normals = normals[first] / np.maximum(np.linalg.norm(normals[first], axis=1, keepdims=True), 1e-30)
+        center, scale = normalization(distinct)
+        p = (distinct - center) / scale
+        g = cloud_graph(p, self.config.points, normals)
+        graph = self.mesh_graph(p, g.normals.astype(np.float32), g.edges)
+        spec = FieldSpec.of(self.config)
+        fields = None if spec is None else torch.as_tensor(cloud_landmark_fields(p, g.part, spec.size).distances,
+                                                           device=device)
+        return self.hierarchy(graph).to(device), fields, scale, expand.reshape(-1)
 
     def finetune(self, vertices: np.ndarray, faces: np.ndarray, **options):
         """Finetune in place on one mesh from exact distances of a few of its vertices; returns the

@@ -387,7 +387,7 @@ def _train(cfg: TrainConfig, model_config, resume, run: Path) -> list[dict]:
     cache = (cfg.field_cache or str(run / "fields.zarr")) if spec else None
     dataset, val_dataset = (BatchDataset(path, cfg.distance, cfg.seed, cfg.pairs_per_mesh, cfg.rotate,
                                          model.config.levels, model.config.sigma_c, model.config.sigma_n,
-                                         spec, cache)
+                                         spec, cache, model.config.points)
                             for path in (cfg.store, cfg.val_store or cfg.store))
     if cache:
         fill_field_cache(cache, spec, [(dataset, train_ids, range(spec.draws)), (val_dataset, val_ids, [0])],
@@ -450,13 +450,16 @@ def build_model(cfg: TrainConfig, model_config, resume, device, log=None):
         guide = {f.name: getattr(model_config, f.name) for f in dataclasses.fields(GeGnnConfig)
                  if f.name.startswith(DECODER_KINDS) and f.name not in ("decoder_hidden", "decoder_blocks")
                  } if own_decoder else {}
-        model_config = dataclasses.replace(init.config, **guide)
+        # The input, meshes or point clouds, from the command line too: a mesh model can start a cloud one.
+        model_config = dataclasses.replace(init.config, **guide,
+                                           points=model_config.points if model_config else init.config.points)
     if resume is None:  # the model says what it predicts
         model_config = dataclasses.replace(model_config or GeGnnConfig(), distance=cfg.distance)
     model = GeGnn(model_config)
     if cfg.init and resume is None:
         state = init.model_state
-        if dataclasses.replace(model_config, distance=init.config.distance) != init.config:
+        same_input = dict(distance=init.config.distance, points=init.config.points)
+        if dataclasses.replace(model_config, **same_input) != init.config:
             # another decoder: none of the old one's weights
             state = {k: v for k, v in state.items() if not k.startswith("distance.")}
         fresh = load_matching(model, state)
@@ -541,7 +544,8 @@ def evaluate_store(model: GeGnn, store_path, distance: str = "geodesic", mesh_id
     device = torch.device(device)
     model.to(device).eval()
     dataset = BatchDataset(store_path, distance, 0, None, False, model.config.levels,
-                           model.config.sigma_c, model.config.sigma_n, FieldSpec.of(model.config))
+                           model.config.sigma_c, model.config.sigma_n, FieldSpec.of(model.config),
+                           cloud=model.config.points)
     rows = []
     for mesh_id in tqdm(mesh_ids or dataset.store.mesh_ids, desc="eval", leave=False):
         batch = dataset[(VAL_EPOCH, (mesh_id,))].to(device)

@@ -1,0 +1,132 @@
+r"""Point clouds as GeGnn inputs: the graph, the normals and the landmark fields from the points alone.
+
+* **Graph**: the k nearest neighbours of every point, symmetrized (an edge where either point is among
+  the other's k nearest).
+* **Normals**: the direction of least variance of each point's neighbourhood (PCA), oriented
+  consistently by propagation along a minimum spanning tree of the graph weighted by
+  :math:`1 - |n_i \cdot n_j|` (Hoppe et al. 1992), each part's tree rooted at its point farthest
+  from the part's centroid, whose normal points away from it (outwards on a closed surface).
+* **Landmark fields**: geodesic farthest-point landmarks on every part of the graph and their distance
+  fields by the point-cloud heat method (potpourri3d's ``PointCloudHeatSolver``: the heat method on the
+  tufted Laplacian of the points' local Delaunay triangulations, Sharp and Crane 2020), as
+  :mod:`gegnn.landmarks` does on meshes.
+
+Exact duplicates are merged before any of it and share their point's values.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from geodata.mesh import label_groups
+
+from .landmarks import LandmarkFields, farthest_point_fields
+
+__all__ = ["CloudGraph", "cloud_graph", "knn_edges", "graph_parts", "pca_normals", "orient_normals",
+           "cloud_landmark_fields", "KNN", "CLOUD_T_COEF"]
+
+KNN = 8             # neighbours a point's graph edges and normal come from
+CLOUD_T_COEF = 1.0  # potpourri3d's default time step for point clouds
+MIN_PART = 8        # parts of fewer points get no fields (distance 0 to themselves), as tiny mesh parts
+
+
+@dataclass
+class CloudGraph:
+    """A point cloud's graph: undirected ``edges`` (E, 2), unit ``normals`` (N, 3) and the part of every
+    point (``part``, (N,), labels 0, 1, ... of the graph's connected components)."""
+
+    edges: np.ndarray
+    normals: np.ndarray
+    part: np.ndarray
+
+
+def knn_edges(points: np.ndarray, k: int = KNN) -> tuple[np.ndarray, np.ndarray]:
+    """Undirected edges (E, 2) of the symmetrized k-nearest-neighbour graph (i < j), and the neighbours
+    (N, k) of every point, nearest first. Needs more than k distinct points."""
+    from scipy.spatial import cKDTree
+
+    _, nbrs = cKDTree(points).query(points, k + 1)
+    nbrs = nbrs[:, 1:]
+    i = np.repeat(np.arange(len(points)), k)
+    j = nbrs.ravel()
+    key = np.unique(np.minimum(i, j) * len(points) + np.maximum(i, j))
+    return np.stack([key // len(points), key % len(points)], axis=1), nbrs
+
+
+def pca_normals(points: np.ndarray, nbrs: np.ndarray) -> np.ndarray:
+    """Unit normals (N, 3), unoriented: the least-variance direction of each point with its neighbours."""
+    hood = np.concatenate([points[:, None], points[nbrs]], axis=1)
+    centered = hood - hood.mean(axis=1, keepdims=True)
+    _, vecs = np.linalg.eigh(np.einsum("nki,nkj->nij", centered, centered))
+    return vecs[:, :, 0]
+
+
+def orient_normals(points: np.ndarray, normals: np.ndarray, edges: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Normals flipped to agree along a minimum spanning tree of the graph (weights 1 - |n_i . n_j|), each
+    part's root pointing away from the part's centroid; and the part of every point."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import breadth_first_order, connected_components, minimum_spanning_tree
+
+    n = len(points)
+    i, j = edges[:, 0], edges[:, 1]
+    weight = 1.0 - np.abs(np.einsum("ij,ij->i", normals[i], normals[j])) + 1e-9  # > 0: kept by the tree
+    tree = minimum_spanning_tree(sp.coo_matrix((weight, (i, j)), shape=(n, n)).tocsr())
+    tree = (tree + tree.T).tocsr()
+    n_parts, part = connected_components(tree, directed=False)
+    out = normals.copy()
+    for members in label_groups(part, n_parts):
+        offset = points[members] - points[members].mean(axis=0)
+        root = members[np.argmax(np.einsum("ij,ij->i", offset, offset))]
+        if out[root] @ (points[root] - points[members].mean(axis=0)) < 0:
+            out[root] = -out[root]
+        order, parent = breadth_first_order(tree, root, directed=False)
+        for v in order[1:]:  # parents come first: each point agrees with its tree parent
+            if out[v] @ out[parent[v]] < 0:
+                out[v] = -out[v]
+    return out, part
+
+
+def cloud_graph(points: np.ndarray, k: int = KNN, normals: np.ndarray | None = None) -> CloudGraph:
+    """The graph of a point cloud of distinct points (see the module); ``normals``: given ones (used as
+    they are, unit length) instead of estimated."""
+    edges, nbrs = knn_edges(points, k)
+    if normals is None:
+        normals, part = orient_normals(points, pca_normals(points, nbrs), edges)
+    else:
+        part = graph_parts(len(points), edges)
+    return CloudGraph(edges, np.asarray(normals, dtype=np.float64), part.astype(np.int64))
+
+
+def graph_parts(n: int, edges: np.ndarray) -> np.ndarray:
+    """Connected-component label (N,) of every point of the graph with undirected ``edges``."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+
+    adjacency = sp.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
+    return connected_components(adjacency, directed=False)[1].astype(np.int64)
+
+
+def cloud_landmark_fields(points: np.ndarray, part: np.ndarray, k: int, seed: int = 0,
+                          t_coef: float = CLOUD_T_COEF) -> LandmarkFields:
+    """K farthest-point landmarks per part of the graph and their point-cloud heat-method distance fields
+    (float32 (N, K)), as :func:`gegnn.landmarks.landmark_fields` on a mesh: deterministic for a given
+    cloud, ``k`` and ``seed``; parts of fewer than MIN_PART points get distance 0."""
+    import potpourri3d as pp3d
+
+    n_parts = int(part.max()) + 1
+    out = np.zeros((len(points), k), dtype=np.float32)
+    landmarks = np.zeros((n_parts, k), dtype=np.int64)
+    for c, idx in enumerate(label_groups(part, n_parts)):
+        rng = np.random.default_rng([seed, c])
+        if len(idx) < MIN_PART:
+            landmarks[c] = idx[0]
+            continue
+        solver = pp3d.PointCloudHeatSolver(np.ascontiguousarray(points[idx], dtype=np.float64), t_coef=t_coef)
+        n_fields = min(k, len(idx))
+        chosen, fields = farthest_point_fields(solver.compute_distance, len(idx), n_fields,
+                                               int(rng.integers(len(idx))))
+        cols = np.arange(k) % len(chosen)
+        out[idx] = fields[:, cols]
+        landmarks[c] = idx[np.asarray(chosen)[cols]]
+    return LandmarkFields(out, landmarks, part)

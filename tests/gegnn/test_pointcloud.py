@@ -1,0 +1,102 @@
+"""Point clouds as GeGnn inputs: the neighbour graph, oriented normals and landmark fields from the points
+alone, against known answers (a sphere's normals are radial and outward, its distances great circles),
+and the point-cloud model end to end (embed, duplicates, training on a store's vertices)."""
+import csv
+
+import numpy as np
+import pytest
+from gegnn_stores import small_config
+
+from gegnn import GeGnn
+from gegnn.pointcloud import cloud_graph, cloud_landmark_fields, knn_edges
+
+
+def fibonacci_sphere(n: int, center=(0.0, 0.0, 0.0), radius: float = 1.0) -> np.ndarray:
+    i = np.arange(n) + 0.5
+    z = 1 - 2 * i / n
+    r, phi = np.sqrt(1 - z * z), np.pi * (1 + 5 ** 0.5) * i
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1) * radius + np.asarray(center)
+
+
+def test_knn_edges_are_each_pair_once_and_hold_every_points_neighbours():
+    p = np.random.default_rng(0).normal(size=(300, 3))
+    edges, nbrs = knn_edges(p, 6)
+    assert (edges[:, 0] < edges[:, 1]).all() and len(np.unique(edges, axis=0)) == len(edges)
+    brute = np.argsort(np.linalg.norm(p[:, None] - p[None], axis=2), axis=1)[:, 1:7]
+    np.testing.assert_array_equal(np.sort(nbrs, axis=1), np.sort(brute, axis=1))
+    have = set(map(tuple, edges.tolist()))
+    assert all((min(i, j), max(i, j)) in have for i in range(len(p)) for j in brute[i])
+
+
+def test_normals_are_radial_and_outward_on_each_of_two_spheres():
+    a, b = fibonacci_sphere(800), fibonacci_sphere(300, center=(5.0, 0, 0), radius=0.5)
+    p = np.concatenate([a, b])
+    g = cloud_graph(p, 8)
+    radial = np.concatenate([a, (b - (5.0, 0, 0)) / 0.5])
+    dots = np.einsum("ij,ij->i", g.normals, radial)
+    assert dots.min() > 0.99  # radial, and every one outward: the orientation reached all points
+    assert np.array_equal(np.unique(g.part[:800]), [g.part[0]]) and g.part[800] != g.part[0]
+
+
+def test_landmark_fields_of_a_sphere_are_great_circle_distances():
+    p = fibonacci_sphere(2000)
+    g = cloud_graph(p, 8)
+    lf = cloud_landmark_fields(p, g.part, 8, seed=3)
+    exact = np.arccos(np.clip(p @ p[lf.landmarks[0]].T, -1, 1))  # (N, K) to the chosen landmarks
+    far = exact > 0.2
+    assert np.mean(np.abs(lf.distances[far] - exact[far]) / exact[far]) < 0.03
+    # farthest-point sampling: the second landmark is (near) the antipode of the first
+    assert exact[lf.landmarks[0][1], 0] > 0.95 * np.pi
+
+
+@pytest.fixture(scope="module")
+def cloud_model():
+    import torch
+    torch.manual_seed(0)
+    return GeGnn(small_config(landmarks=8, points=8)).eval()
+
+
+def test_a_cloud_model_embeds_points_and_duplicates_share_codes(cloud_model):
+    p = fibonacci_sphere(600) * 2.0
+    emb = cloud_model.embed(np.concatenate([p, p[:5]]))  # five points twice
+    assert emb.num_vertices == 605
+    np.testing.assert_array_equal(emb.features[600:].numpy(), emb.features[:5].numpy())
+    d = emb.distance(np.arange(5), np.arange(600, 605))
+    np.testing.assert_array_equal(d, 0)
+    far = emb.distance(np.zeros(600, dtype=int), np.arange(600))
+    assert np.isfinite(far).all() and far.max() > 0
+
+
+def test_a_cloud_model_says_what_it_takes(cloud_model):
+    p = fibonacci_sphere(100)
+    with pytest.raises(ValueError, match="points only"):
+        cloud_model.embed(p, np.array([[0, 1, 2]]))
+    with pytest.raises(ValueError, match="more than the 8 neighbours"):
+        cloud_model.embed(np.concatenate([p[:5]] * 3))
+    with pytest.raises(ValueError, match="finite"):
+        cloud_model.embed(np.where(np.arange(100)[:, None] == 7, np.nan, p))
+    with pytest.raises(ValueError, match="give faces"):
+        GeGnn(small_config()).embed(p)
+
+
+def test_given_normals_are_used_as_they_are(cloud_model):
+    p = fibonacci_sphere(400)
+    inward = cloud_model.cloud_inputs(p, -p, "cpu")[0].graphs[0].normal.numpy()
+    np.testing.assert_allclose(inward, -p[np.unique(p, axis=0, return_index=True)[1]], atol=1e-6)
+
+
+def test_train_a_cloud_model_on_a_stores_vertices(tiny_store, tmp_path):
+    from click.testing import CliRunner
+
+    from gegnn.cli import main
+
+    run = tmp_path / "run"
+    result = CliRunner().invoke(main, ["train", tiny_store, "--run", str(run), "--epochs", "1", "--batch-size", "2",
+                                       "--device", "cpu", "--channels", "16", "--blocks", "1,1,1,1,1",
+                                       "--pairs-per-mesh", "200", "--landmarks", "8", "--points", "6"])
+    assert result.exit_code == 0, result.output
+    model = GeGnn.from_checkpoint(run / "best.safetensors")
+    assert model.config.points == 6 and model.config.landmarks == 8
+    assert (run / "fields.zarr" / "k8-cloud6").exists()  # the cloud's fields, apart from a mesh model's
+    with open(run / "metrics.csv") as f:
+        assert float(next(csv.DictReader(f))["val_mre"]) < 1.0
