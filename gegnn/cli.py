@@ -204,6 +204,9 @@ def evaluate(checkpoint, store, distance, device, csv_path):
 @click.option("--exact", is_flag=True, help="Also compute the exact field (geodata's exact solver of the distance "
                                             "the model predicts: geodesic or biharmonic) and report the error; a "
                                             "PNG shows predicted | exact | relative error.")
+@click.option("--mesh", "cloud_mesh", type=click.Path(exists=True, dir_okay=False),
+              help="For a point-cloud model: the surface the cloud was taken from; with --exact, the exact field "
+                   "on it from the source point, read at every point.")
 @click.option("--path", "path_to", type=int, metavar="J",
               help="Trace the geodesic path from --source to vertex J on the predicted field (a PNG draws "
                    "it); with --exact also potpourri3d's exact edge-flip path, and the lengths of both.")
@@ -212,8 +215,8 @@ def evaluate(checkpoint, store, distance, device, csv_path):
 @PRECISION_OPTION
 @UP_OPTION
 @SIZE_OPTION
-def query(files, pretrained, source, pairs_csv, points_file, output, exact, path_to, prepare, device, precision, up,
-          size):
+def query(files, pretrained, source, pairs_csv, points_file, output, exact, cloud_mesh, path_to, prepare, device,
+          precision, up, size):
     """Distances on MESH (OBJ/OFF/PLY/STL/GLB, any units) predicted by CHECKPOINT or --pretrained: geodesic,
     or biharmonic with a biharmonic model (--pretrained biharmonic).
 
@@ -237,6 +240,14 @@ def query(files, pretrained, source, pairs_csv, points_file, output, exact, path
     from .query import read_pairs
 
     model_spec, (mesh_path,) = _model_and_meshes(files, pretrained)
+    if _model_config(model_spec, pretrained).points:
+        if source is None or pairs_csv or points_file or path_to is not None or prepare:
+            raise click.UsageError("a point-cloud model answers --source I (with --exact --mesh MESH to compare)")
+        return _query_cloud(model_spec, pretrained, mesh_path, source, output,
+                            _output_suffix(output, (".npy", ".ply", ".png")), exact, cloud_mesh, device, precision,
+                            up, size)
+    if cloud_mesh:
+        raise click.UsageError("--mesh goes with a point-cloud model (the file is the mesh here)")
     if sum(x is not None for x in (source, pairs_csv, points_file)) != 1:
         raise click.UsageError("give one of --source, --pairs or --points")
     if exact and pairs_csv:
@@ -531,6 +542,92 @@ def _query_points(model_spec, pretrained, mesh_path, points_file, output, suffix
             Path(output).write_text(text)
         else:
             click.echo(text, nl=False)
+    if output:
+        click.echo(f"written {output}")
+
+
+def _query_cloud(model_spec, pretrained, cloud_path, source, output, suffix, exact, mesh_path, device, precision,
+                 up, size):
+    """``gegnn query`` with a point-cloud model: the field of point ``source`` over the cloud, NaN at outliers
+    and on other parts of its neighbour graph; with --exact --mesh, against the exact field on the mesh."""
+    import numpy as np
+
+    from geodata.mesh import MeshError
+    from geodata.stages.cloud import load_cloud_file, outliers
+
+    from .pointcloud import graph_parts, knn_edges
+    from .train import METRIC_EPS
+
+    name = Path(cloud_path).name
+    try:
+        cloud = load_cloud_file(cloud_path)
+    except MeshError as exc:
+        raise click.ClickException(f"{cloud_path}: {exc.reason}") from None
+    points, n = cloud.points, len(cloud.points)
+    for note in cloud.notes:
+        click.echo(f"{name}: note: {note}")
+    if not 0 <= source < n:
+        raise click.ClickException(f"{cloud_path}: point {source} out of range: {name} has {n} points")
+    far = outliers(points)
+    if source in far:
+        raise click.ClickException(f"{cloud_path}: point {source} is far from all other points (an outlier): "
+                                   "no distances from it")
+    if len(far):
+        click.echo(f"{name}: note: {len(far)} points far from all others (the first: point {far[0]}) are left out "
+                   "(NaN)")
+    if exact and not mesh_path:
+        raise click.UsageError("--exact with a point cloud needs --mesh MESH, the surface it was taken from")
+    keep = np.setdiff1d(np.arange(n), far)
+    model = _load_model(model_spec, pretrained, device)
+    normals = None if cloud.normals is None else cloud.normals[keep]
+    try:
+        emb = model.embed(points[keep], normals=normals, precision=precision)
+    except ValueError as exc:
+        raise click.ClickException(f"{cloud_path}: {exc}") from None
+    distinct, inverse = np.unique(points[keep], axis=0, return_inverse=True)
+    part = graph_parts(len(distinct), knn_edges(distinct, model.config.points)[0])[inverse.reshape(-1)]
+    local = int(np.searchsorted(keep, source))
+    field = np.full(n, np.nan)
+    field[keep] = np.where(part == part[local], emb.field(local), np.nan)
+    n_parts = int(part.max()) + 1
+    click.echo(f"{name}: {n} points{'' if cloud.normals is None else ' with normals'}; {n_parts} part(s) in the "
+               f"{model.config.points}-neighbour graph; {model.config.distance} distance from point {source}: "
+               f"min {np.nanmin(field):.4g} max {np.nanmax(field):.4g}")
+    exact_d = None
+    if exact:
+        from .query import exact_at_points, load_query_mesh
+        try:
+            qm = load_query_mesh(mesh_path)
+            exact_d, offset = exact_at_points(qm.mesh, points, source, model.config.distance)
+        except MeshError as exc:
+            raise click.ClickException(f"{mesh_path}: --exact: {exc.reason}") from None
+        err = np.abs(field - exact_d) / (exact_d + METRIC_EPS * qm.scale)
+        err[source] = np.nan
+        click.echo(f"mean relative error vs exact on {Path(mesh_path).name}: {100 * np.nanmean(err):.2f}% (median "
+                   f"{100 * np.nanmedian(err):.2f}%; the points lie within {offset.max():.3g} of the surface)")
+    top = float(np.nanmax(exact_d if exact_d is not None else field))
+    if suffix == ".npy":
+        np.save(output, field)
+    elif suffix == ".ply":
+        import matplotlib
+        import trimesh
+
+        from .render import UNREACHABLE
+        colors = matplotlib.colormaps["viridis"](np.nan_to_num(field / max(top, 1e-30)))
+        colors[np.isnan(field)] = UNREACHABLE
+        trimesh.PointCloud(points, colors=(colors * 255).astype(np.uint8)).export(output)
+    elif suffix == ".png":
+        from .render import Panel, Row, save_panels
+
+        panels = [Panel(field, "predicted", vmin=0, vmax=top)]
+        if exact_d is not None:
+            panels += [Panel(exact_d, "exact", vmin=0, vmax=top),
+                       Panel(np.where(np.isnan(err), 0.0, err), "relative error", "magma", "|pred - exact| / exact",
+                             0, 0.1, isolines=0)]
+        from .pointcloud import pca_normals
+        lit = cloud.normals if cloud.normals is not None else pca_normals(points, knn_edges(points, 8)[1])
+        save_panels(output, [Row(points, None, source, panels, normals=lit)], size=size, up=up,
+                    suptitle=f"{name}, point {source}")
     if output:
         click.echo(f"written {output}")
 

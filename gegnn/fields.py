@@ -157,9 +157,13 @@ class FieldCache:
                 bar.update()
         else:
             with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
-                for future in as_completed([pool.submit(_fields, *item, self.spec) for item in todo]):
-                    self.put(*future.result())
-                    bar.update()
+                try:
+                    for future in as_completed([pool.submit(_fields, *item, self.spec) for item in todo]):
+                        self.put(*future.result())
+                        bar.update()
+                except BaseException:  # fail now: leaving the block would first compute every queued item
+                    pool.shutdown(wait=False, cancel_futures=True)
+                    raise
         bar.close()
 
 

@@ -28,7 +28,8 @@ __all__ = ["CloudGraph", "cloud_graph", "knn_edges", "graph_parts", "pca_normals
 
 KNN = 8             # neighbours a point's graph edges and normal come from
 CLOUD_T_COEF = 1.0  # potpourri3d's default time step for point clouds
-MIN_PART = 8        # parts of fewer points get no fields (distance 0 to themselves), as tiny mesh parts
+MIN_PART = 31       # parts of fewer points get no fields (distance 0): potpourri3d's point-cloud solver
+                    # needs more points than its 30 neighbours
 
 
 @dataclass
@@ -111,7 +112,8 @@ def cloud_landmark_fields(points: np.ndarray, part: np.ndarray, k: int, seed: in
                           t_coef: float = CLOUD_T_COEF) -> LandmarkFields:
     """K farthest-point landmarks per part of the graph and their point-cloud heat-method distance fields
     (float32 (N, K)), as :func:`gegnn.landmarks.landmark_fields` on a mesh: deterministic for a given
-    cloud, ``k`` and ``seed``; parts of fewer than MIN_PART points get distance 0."""
+    cloud, ``k`` and ``seed``; parts of fewer than MIN_PART points get distance 0 (as a mesh's parts of
+    fewer than 3 vertices)."""
     import potpourri3d as pp3d
 
     n_parts = int(part.max()) + 1

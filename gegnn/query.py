@@ -20,7 +20,7 @@ from .train import METRIC_EPS
 
 __all__ = ["QueryMesh", "load_query_mesh", "exact_field", "exact_fields", "relative_errors", "read_pairs",
            "source_part", "largest_part", "resolution_note", "read_indices", "read_points",
-           "require_edge_manifold"]
+           "require_edge_manifold", "exact_at_points"]
 
 
 
@@ -92,6 +92,22 @@ def exact_fields(mesh: Mesh, sources: np.ndarray, distance: str = "geodesic") ->
         require_edge_manifold(mesh)
     d = run_isolated(_solve_all, mesh, [int(s) for s in sources], distance)
     return np.where(np.isfinite(d), d, np.nan)
+
+
+def exact_at_points(mesh: Mesh, points: np.ndarray, source: int, distance: str = "geodesic"):
+    """Exact distances from ``points[source]`` to every point of a cloud taken from ``mesh``: every point
+    moved to its closest surface point, the source's inserted as a vertex, the exact field from it read at
+    each point by barycentric interpolation (exact at the mesh's vertices, linear between them). Returns
+    the distances (P,) (NaN off the source's part) and each point's distance to the surface (P,)."""
+    from geodata.surface_points import insert_points, locate_points
+
+    located = locate_points(mesh, points)
+    refined, vertex = insert_points(mesh, located.face[[source]], located.bary[[source]])
+    field = exact_field(refined, int(vertex[0]), distance)
+    again = locate_points(refined, points)
+    values = np.einsum("pk,pk->p", again.bary, field[refined.faces[again.face]])
+    values[source] = 0.0
+    return values, located.offset
 
 
 def require_edge_manifold(mesh: Mesh) -> None:

@@ -10,7 +10,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["View", "UP_AXES", "up_axis", "tipping_margin", "default_view", "project", "rasterize", "shade_field", "checkerboard", "visible_polyline",
+__all__ = ["View", "UP_AXES", "up_axis", "tipping_margin", "default_view", "project", "rasterize", "shade_field",
+           "shade_points", "checkerboard", "visible_polyline",
            "Panel", "Row", "save_panels"]
 
 
@@ -28,17 +29,20 @@ FRONTS = {"x": (0, 0, 1.0), "y": (0, 0, 1.0), "z": (0, -1.0, 0)}  # where a mode
 SUPPORT = 0.02  # the points a mesh stands on: within this fraction of its largest extent of its lowest
 
 
-def tipping_margin(vertices: np.ndarray, faces: np.ndarray, up: np.ndarray) -> float:
+def tipping_margin(vertices: np.ndarray, faces: np.ndarray | None, up: np.ndarray) -> float:
     r"""How stably the mesh stands on its lowest points along ``up``: the tangent of the angle it can be
     tipped before its centroid leaves its base, :math:`m = s / h` with :math:`h` the height of the area
-    centroid over the lowest point and :math:`s` the distance of its projection to the edge of the base
-    (the convex hull of the points within SUPPORT of the lowest), positive inside, negative outside; -inf
-    where the base is a point or a line."""
+    centroid (a point cloud's: the mean point, ``faces`` None) over the lowest point and :math:`s` the
+    distance of its projection to the edge of the base (the convex hull of the points within SUPPORT of
+    the lowest), positive inside, negative outside; -inf where the base is a point or a line."""
     from scipy.spatial import ConvexHull, QhullError
 
-    tri = vertices[faces]
-    area = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
-    centroid = (tri.mean(axis=1) * area[:, None]).sum(axis=0) / max(area.sum(), 1e-300)
+    if faces is None:
+        centroid = vertices.mean(axis=0)
+    else:
+        tri = vertices[faces]
+        area = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+        centroid = (tri.mean(axis=1) * area[:, None]).sum(axis=0) / max(area.sum(), 1e-300)
     height = vertices @ up
     base = vertices[height <= height.min() + SUPPORT * np.ptp(vertices, axis=0).max()]
     e1 = np.cross(up, (1.0, 0, 0) if abs(up[0]) < 0.9 else (0, 1.0, 0))
@@ -52,7 +56,7 @@ def tipping_margin(vertices: np.ndarray, faces: np.ndarray, up: np.ndarray) -> f
     return float(inside / max(centroid @ up - height.min(), 1e-300))
 
 
-def up_axis(vertices: np.ndarray, faces: np.ndarray) -> str:
+def up_axis(vertices: np.ndarray, faces: np.ndarray | None) -> str:
     """The direction that is up in the mesh's own coordinates, "+y" or "+z": mesh files are written y-up
     (OBJ and glTF conventions, most scans) or z-up (CAD, 3D printing, some scans, e.g. Stanford's Lucy).
 
@@ -77,11 +81,12 @@ def up_axis(vertices: np.ndarray, faces: np.ndarray) -> str:
     return "+z" if m_z > 0 and (m_y < 0 or m_z > 2 * m_y) else "+y"
 
 
-def default_view(vertices: np.ndarray, faces: np.ndarray, up: str | None = None, towards: np.ndarray | None = None,
-                 elevation: float = 0.35, azimuth: float = 0.35) -> View:
+def default_view(vertices: np.ndarray, faces: np.ndarray | None, up: str | None = None,
+                 towards: np.ndarray | None = None, elevation: float = 0.35, azimuth: float = 0.35) -> View:
     """The camera of a picture: ``up`` (a key of UP_AXES; default :func:`up_axis`) is vertical on the
-    screen, and the camera looks from the horizontal direction that shows the largest area, turned by
-    ``azimuth`` about the up axis and raised by ``elevation`` (radians) for depth.
+    screen, and the camera looks from the horizontal direction that shows the largest area (a point
+    cloud's, ``faces`` None: along which it is thinnest), turned by ``azimuth`` about the up axis and
+    raised by ``elevation`` (radians) for depth.
 
     Of the two sides, the camera takes the one of ``towards`` (a direction, e.g. the source's normal)
     when given, else the files' front: +z for a y-up mesh, -y for a z-up one.
@@ -91,11 +96,14 @@ def default_view(vertices: np.ndarray, faces: np.ndarray, up: str | None = None,
     front = np.asarray(FRONTS[up_name[1]])
     e1 = np.roll(np.abs(u), 1)  # a horizontal axis; e2 = u x e1 the other
     e2 = np.cross(u, e1)
-    tri = vertices[faces]
-    normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])  # area-weighted
     angles = np.linspace(0, np.pi, 36, endpoint=False)
     directions = np.cos(angles)[:, None] * e1 + np.sin(angles)[:, None] * e2
-    forward = directions[np.abs(normals @ directions.T).sum(axis=0).argmax()]  # the largest projected area
+    if faces is None:
+        forward = directions[(vertices @ directions.T).std(axis=0).argmin()]
+    else:
+        tri = vertices[faces]
+        normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])  # area-weighted
+        forward = directions[np.abs(normals @ directions.T).sum(axis=0).argmax()]  # the largest projected area
     side = front if towards is None or abs(towards @ forward) < 1e-12 else towards
     if forward @ side < 0:
         forward = -forward
@@ -211,29 +219,79 @@ def shade_field(vertices, faces, field, view: View, *, size=512, cmap="viridis",
     between vmin and vmax; ``marker`` draws a red dot on that vertex when it is visible. A field of
     (u, v) pairs (N, 2) is drawn as a checkerboard with squares of side ``vmax`` instead. ``raster``: the
     mesh's :func:`rasterize` in this view and size, when the caller has it."""
-    import matplotlib
-
-    vmin = float(np.nanmin(field)) if vmin is None else vmin
-    vmax = float(np.nanmax(field)) if vmax is None else vmax
     raster = rasterize(vertices, faces, view, size) if raster is None else raster
     face_img, bary, xy, depth = raster
     covered = face_img >= 0
     f = np.where(covered, face_img, 0)
+    n = np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]], vertices[faces[:, 2]] - vertices[faces[:, 0]])
+    n_view = (n @ view.rotation.T)[:, 2] / np.maximum(np.linalg.norm(n, axis=1), 1e-30)
+    light = 0.45 + 0.55 * np.abs(n_view)[f]
     if field.ndim == 2:  # (u, v) per vertex: a checkerboard texture, interpolated per pixel
         uv = (field[faces[f]] * bary[..., None]).sum(axis=2)
         unreachable = covered & np.isnan(uv).any(axis=2)
         rgba = checkerboard(np.nan_to_num(uv), vmax)
-        t = np.zeros(uv.shape[:2])
-        isolines = 0
+        rgba = _paint(rgba, np.zeros(uv.shape[:2]), covered, unreachable, light, 0)
     else:
         value = (field[faces[f]] * bary).sum(axis=2)
-        unreachable = covered & np.isnan(value)  # NaN: no value there (e.g. another part than the source's)
-        t = np.clip((np.nan_to_num(value) - vmin) / max(vmax - vmin, 1e-12), 0, 1)
-        rgba = matplotlib.colormaps[cmap](t)
+        rgba = _paint_values(value, covered, light, field, cmap, vmin, vmax, isolines)
+    if marker is not None:
+        shown = _surface_depth(raster, faces, xy[[marker]])[0]
+        _marker(rgba, xy[marker], np.isfinite(shown) and depth[marker] >= shown - _depth_tolerance(depth))
+    return rgba
+
+
+def shade_points(points, field, view: View, *, normals=None, size=512, cmap="viridis", vmin=None, vmax=None,
+                 isolines: int = 12, marker: int | None = None) -> np.ndarray:
+    """RGBA image (H, W, 4) of a point cloud coloured by ``field`` (per point): every point a disc of
+    about the cloud's spacing, the nearest in front, lit by its normal (``normals``; unlit without), with
+    ``isolines`` where neighbouring discs fall in different levels; ``marker``: a red dot on that point."""
+    from scipy.spatial import cKDTree
+
+    xy, depth = project(points, view, points, size)
+    plane = (points - view.center) @ view.rotation[:2].T
+    pixels_per_unit = (1 - 2 * 0.05) * size / max(np.ptp(plane, axis=0).max(), 1e-12)  # as project's margin
+    # The spacing: half the distance to the 8th nearest point (robust to duplicates and near-duplicates).
+    spacing = 0.5 * np.median(cKDTree(points).query(points, 9)[0][:, -1]) if len(points) > 8 else 0.0
+    r = max(1.0, 0.9 * spacing * pixels_per_unit)
+    oy, ox = np.mgrid[-int(np.ceil(r)):int(np.ceil(r)) + 1, -int(np.ceil(r)):int(np.ceil(r)) + 1]
+    disc = np.stack([ox.ravel(), oy.ravel()], axis=1)[(ox ** 2 + oy ** 2).ravel() <= r * r]
+    px = np.floor(xy).astype(np.int64)[:, None, :] + disc[None]
+    inside = ((px >= 0) & (px < size)).all(axis=2)
+    who, k = np.nonzero(inside)
+    pix = px[who, k, 1] * size + px[who, k, 0]
+    order = np.lexsort((-depth[who], pix))  # per pixel, nearest first
+    first = order[np.r_[True, pix[order][1:] != pix[order][:-1]]] if len(order) else order
+    point_img = np.full(size * size, -1, dtype=np.int64)
+    point_img[pix[first]] = who[first]
+    point_img = point_img.reshape(size, size)
+    covered = point_img >= 0
+    p = np.where(covered, point_img, 0)
+    if normals is None:
+        light = np.ones((size, size))
+    else:
+        light = 0.45 + 0.55 * np.abs((normals @ view.rotation.T)[:, 2])[p]
+    rgba = _paint_values(field[p], covered, light, field, cmap, vmin, vmax, isolines)
+    if marker is not None:
+        x, y = np.clip(np.floor(xy[marker]), 0, size - 1).astype(int)
+        _marker(rgba, xy[marker], depth[marker] >= depth[point_img[y, x]] - _depth_tolerance(depth)
+                if point_img[y, x] >= 0 else False)
+    return rgba
+
+
+def _paint_values(value, covered, light, field, cmap, vmin, vmax, isolines) -> np.ndarray:
+    """Colormap (grey where NaN: no value, e.g. another part than the source's), light and isolines of a
+    per-pixel value image."""
+    import matplotlib
+
+    vmin = float(np.nanmin(field)) if vmin is None else vmin
+    vmax = float(np.nanmax(field)) if vmax is None else vmax
+    unreachable = covered & np.isnan(value)
+    t = np.clip((np.nan_to_num(value) - vmin) / max(vmax - vmin, 1e-12), 0, 1)
+    return _paint(matplotlib.colormaps[cmap](t), t, covered, unreachable, light, isolines)
+
+
+def _paint(rgba, t, covered, unreachable, light, isolines) -> np.ndarray:
     rgba[unreachable] = UNREACHABLE
-    n = np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]], vertices[faces[:, 2]] - vertices[faces[:, 0]])
-    n_view = (n @ view.rotation.T)[:, 2] / np.maximum(np.linalg.norm(n, axis=1), 1e-30)
-    light = 0.45 + 0.55 * np.abs(n_view)[f]
     rgba[..., :3] *= light[..., None]
     if isolines:
         band = np.floor(t * isolines - 1e-9)
@@ -244,16 +302,17 @@ def shade_field(vertices, faces, field, view: View, *, size=512, cmap="viridis",
             edge |= both & (other != band) & ~unreachable & ~np.roll(unreachable, shift, axis=(0, 1))
         rgba[edge, :3] *= 0.25
     rgba[~covered] = (1, 1, 1, 0)
-    if marker is not None:
-        x, y = xy[marker]
-        r = max(2, size // 120)
-        yy, xx = np.mgrid[0:size, 0:size]
-        dot = (xx - x) ** 2 + (yy - y) ** 2 <= r * r
-        # Visible when on the surface and not far behind the surface drawn at its pixel.
-        shown = _surface_depth(raster, faces, xy[[marker]])[0]
-        if np.isfinite(shown) and depth[marker] >= shown - _depth_tolerance(depth):
-            rgba[dot] = (0.85, 0.1, 0.1, 1)
     return rgba
+
+
+def _marker(rgba, xy, visible: bool) -> None:
+    """A red dot at pixel ``xy`` where ``visible`` (not hidden behind the surface drawn there)."""
+    if not visible:
+        return
+    size = rgba.shape[0]
+    r = max(2, size // 120)
+    yy, xx = np.mgrid[0:size, 0:size]
+    rgba[(xx - xy[0]) ** 2 + (yy - xy[1]) ** 2 <= r * r] = (0.85, 0.1, 0.1, 1)
 
 
 @dataclass
@@ -273,19 +332,21 @@ class Panel:
 @dataclass
 class Row:
     """One mesh's row of a figure: its panels, the source vertex to mark (None: no marker), and polylines
-    on the surface drawn on every panel (e.g. geodesic paths), with their legend labels."""
+    on the surface drawn on every panel (e.g. geodesic paths), with their legend labels. A point cloud's
+    row has ``faces`` None (and no lines), and its ``normals`` if it has them."""
 
     vertices: np.ndarray
-    faces: np.ndarray
+    faces: np.ndarray | None
     source: int | None
     panels: list[Panel]
     lines: list[tuple[np.ndarray, str]] = field(default_factory=list)
+    normals: np.ndarray | None = None
 
 
 def save_panels(path, rows: list[Row], *, suptitle: str | None = None, size: int = 480, up: str | None = None) -> None:
-    """A grid of rendered fields, one row per mesh, each panel with a color bar, saved as PNG, each
-    mesh rendered at ``size`` x ``size`` pixels (the figure scales with it). A row's camera is `default_view` with ``up`` (default: each mesh's
-    :func:`up_axis`), on the side of the source when there is one."""
+    """A grid of rendered fields, one row per mesh or point cloud, each panel with a color bar, saved as
+    PNG, each rendered at ``size`` x ``size`` pixels (the figure scales with it). A row's camera is
+    `default_view` with ``up`` (default: each row's :func:`up_axis`), on the side of the source if any."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -296,9 +357,13 @@ def save_panels(path, rows: list[Row], *, suptitle: str | None = None, size: int
     fig, axes = plt.subplots(len(rows), ncols, figsize=(3.6 * ncols, 3.4 * len(rows)), squeeze=False)
     for r, row in enumerate(rows):
         v, f, src = row.vertices, row.faces, row.source
-        cam = default_view(v, f, up, None if src is None else vertex_normals(Mesh(v, f))[src])
-        raster = rasterize(v, f, cam, size)  # one camera per row: every panel and line shares it
-        lines = [(visible_polyline(v, f, cam, points, size, raster), label) for points, label in row.lines]
+        normals = row.normals if f is None else vertex_normals(Mesh(v, f))
+        cam = default_view(v, f, up, None if src is None or normals is None else normals[src])
+        if f is None:
+            raster, lines = None, []
+        else:
+            raster = rasterize(v, f, cam, size)  # one camera per row: every panel and line shares it
+            lines = [(visible_polyline(v, f, cam, points, size, raster), label) for points, label in row.lines]
         for c in range(ncols):
             ax = axes[r, c]
             ax.set_axis_off()
@@ -307,8 +372,9 @@ def save_panels(path, rows: list[Row], *, suptitle: str | None = None, size: int
             p = row.panels[c]
             vmin = float(np.min(p.field)) if p.vmin is None else p.vmin
             vmax = float(np.max(p.field)) if p.vmax is None else p.vmax
-            ax.imshow(shade_field(v, f, p.field, cam, size=size, cmap=p.cmap, vmin=vmin, vmax=vmax,
-                                   isolines=p.isolines, marker=src, raster=raster))
+            style = dict(size=size, cmap=p.cmap, vmin=vmin, vmax=vmax, isolines=p.isolines, marker=src)
+            ax.imshow(shade_points(v, p.field, cam, normals=normals, **style) if f is None else
+                      shade_field(v, f, p.field, cam, raster=raster, **style))
             ax.set_title(p.title, fontsize=10)
             for (xy, label), color, style in zip(lines, ("#e8196b", "#ffd400", "#00e5ff"), ("-", "--", ":")):
                 ax.plot(xy[:, 0], xy[:, 1], style, color=color, lw=1.6, label=label)

@@ -100,3 +100,38 @@ def test_train_a_cloud_model_on_a_stores_vertices(tiny_store, tmp_path):
     assert (run / "fields.zarr" / "k8-cloud6").exists()  # the cloud's fields, apart from a mesh model's
     with open(run / "metrics.csv") as f:
         assert float(next(csv.DictReader(f))["val_mre"]) < 1.0
+
+
+def test_query_a_cloud_with_an_outlier_against_the_exact_field(cloud_model, tmp_path):
+    """gegnn query with a point-cloud model: the field over the cloud in the file's order, NaN at the outlier;
+    --exact --mesh reads the exact field of the sphere it was taken from at every point."""
+    import trimesh
+    from click.testing import CliRunner
+
+    from gegnn.cli import main
+    from gegnn.query import exact_at_points
+
+    sphere = trimesh.creation.icosphere(4)
+    p = fibonacci_sphere(1500)
+    np.savetxt(tmp_path / "cloud.xyz", np.concatenate([p, [[40.0, 0, 0]]]))
+    sphere.export(tmp_path / "sphere.obj")
+    cloud_model.save(tmp_path / "cloud.safetensors")
+    result = CliRunner().invoke(main, ["query", str(tmp_path / "cloud.safetensors"), str(tmp_path / "cloud.xyz"),
+                                       "--source", "3", "--exact", "--mesh", str(tmp_path / "sphere.obj"),
+                                       "-o", str(tmp_path / "field.npy")])
+    assert result.exit_code == 0, result.output
+    assert "1 points far from all others (the first: point 1500)" in result.output
+    assert "mean relative error vs exact on sphere.obj" in result.output
+    field = np.load(tmp_path / "field.npy")
+    assert field.shape == (1501,) and np.isnan(field[1500]) and np.isfinite(field[:1500]).all() and field[3] == 0
+
+    exact, offset = exact_at_points(sphere_mesh(sphere), p, 3)
+    great_circle = np.arccos(np.clip(p @ p[3], -1, 1))
+    far = great_circle > 0.3
+    assert offset.max() < 0.01
+    assert np.mean(np.abs(exact[far] - great_circle[far]) / great_circle[far]) < 0.01
+
+
+def sphere_mesh(tm):
+    from geodata.mesh import Mesh
+    return Mesh(np.asarray(tm.vertices), np.asarray(tm.faces))
