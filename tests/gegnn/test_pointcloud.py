@@ -135,3 +135,12 @@ def test_query_a_cloud_with_an_outlier_against_the_exact_field(cloud_model, tmp_
 def sphere_mesh(tm):
     from geodata.mesh import Mesh
     return Mesh(np.asarray(tm.vertices), np.asarray(tm.faces))
+
+
+def test_a_part_too_small_for_the_heat_method_gets_no_fields():
+    """potpourri3d's cloud solver needs more than 30 points (a 13-point part of a training mesh raised)."""
+    p = np.concatenate([fibonacci_sphere(500), fibonacci_sphere(13, center=(9.0, 0, 0), radius=0.2)])
+    g = cloud_graph(p, 8)
+    lf = cloud_landmark_fields(p, g.part, 4)
+    assert len(np.unique(g.part)) == 2
+    assert (lf.distances[500:] == 0).all() and (lf.distances[:500].max(axis=0) > 2.5).all()
