@@ -56,7 +56,7 @@ import scipy.sparse as sp
 
 from geodata.biharmonic import ldlt
 
-__all__ = ["HeatDistance", "cover_problem", "MOLLIFY", "DELAUNAY_EPS", "POISSON_SHIFT"]
+__all__ = ["HeatSolver", "HeatDistance", "cover_problem", "MOLLIFY", "DELAUNAY_EPS", "POISSON_SHIFT"]
 
 MOLLIFY = 1e-5          # mollification margin, relative to the mean cover edge length
 DELAUNAY_EPS = 1e-6     # flip an edge whose cotangent weight is below -DELAUNAY_EPS
@@ -214,12 +214,7 @@ def _flip_to_delaunay(cover: _Cover, eps: float = DELAUNAY_EPS) -> int:
         new = math.sqrt(x1 * x1 + y1 * y1)
         if not math.isfinite(new) or ha2 == hb1 or hb2 == ha1:
             return ()
-        fa, fb = face[ha1], face[hb1]
-        f_he[fa], f_he[fb] = ha1, hb1
-        nxt[ha1], nxt[hb3], nxt[ha2] = hb3, ha2, ha1
-        nxt[hb1], nxt[ha3], nxt[hb2] = ha3, hb2, hb1
-        vert[ha1], vert[hb1] = vert[ha3], vert[hb3]
-        face[ha3], face[hb3] = fb, fa
+        relink(nxt, vert, face, f_he, face[ha1], face[hb1], (ha1, ha2, ha3), (hb1, hb2, hb3))
         length[e] = new
         refresh(ha1)
         refresh(hb1)
@@ -255,6 +250,17 @@ def _flip_to_delaunay(cover: _Cover, eps: float = DELAUNAY_EPS) -> int:
                 in_fifo[n] = 1
                 fifo.append(n)
     return n_flips
+
+
+def relink(nxt, vert, face, f_he, fa, fb, a, b) -> None:
+    """The halfedge links after flipping the edge between faces ``fa`` (halfedges ``a`` = (a1, a2, a3),
+    a1 on the edge) and ``fb`` (``b``, b1 its twin): one flip (ints) or many disjoint ones (index arrays)."""
+    (ha1, ha2, ha3), (hb1, hb2, hb3) = a, b
+    f_he[fa], f_he[fb] = ha1, hb1
+    nxt[ha1], nxt[hb3], nxt[ha2] = hb3, ha2, ha1
+    nxt[hb1], nxt[ha3], nxt[hb2] = ha3, hb2, hb1
+    vert[ha1], vert[hb1] = vert[ha3], vert[hb3]
+    face[ha3], face[hb3] = fb, fa
 
 
 def _layout_from_origin(l_ab: float, l_bc: float, l_ca: float) -> tuple[float, float]:
@@ -371,7 +377,68 @@ class _Factor:
         return self._solve(self._igl, b, none, none).reshape(rhs.shape)
 
 
-class HeatDistance:
+class HeatSolver:
+    """The heat method's two solves on operators built once (a subclass builds them): :math:`(M + tL)`,
+    :math:`(L + 10^{-6} I)` factored, the per-face gradient and divergence; then :meth:`distance` or
+    :meth:`distances` for any sources, CHUNK of them per solve.
+
+    Attributes:
+        n: vertex count; t: the time step.
+    """
+
+    CHUNK = 8  # columns per multi-source solve (keeps the per-face arrays in cache)
+
+    def _factor(self, what: str, lap: sp.csc_matrix, mass: np.ndarray, grad, div) -> None:
+        """Factor (M + tL) and (L + shift I) of ``lap``, ``mass`` and ``self.t``; keep ``grad``, ``div``."""
+        if not (np.isfinite(lap.data).all() and np.isfinite(mass).all() and np.isfinite(self.t)):
+            raise ValueError(f"{what}: non-finite operators (degenerate input)")
+        self._grad, self._div = grad, div
+        diagonal = np.flatnonzero(lap.indices == np.repeat(np.arange(self.n), np.diff(lap.indptr)))
+        heat, poisson = lap.copy(), lap                       # (M + tL), (L + shift I): same pattern
+        heat.data *= self.t
+        heat.data[diagonal] += mass
+        poisson.data[diagonal] += POISSON_SHIFT
+        try:
+            self._heat, self._poisson = _Factor(heat), _Factor(poisson)
+        except RuntimeError as exc:
+            raise ValueError(f"{what}: cannot factor ({exc})") from None
+
+    def distances(self, sources) -> np.ndarray:
+        """float64 (N, len(sources)): column j is the distance field of ``sources[j]`` alone."""
+        sources = np.atleast_1d(np.asarray(sources, dtype=np.int64))
+        out = np.empty((self.n, len(sources)))
+        for start in range(0, len(sources), self.CHUNK):
+            chunk = sources[start:start + self.CHUNK]
+            columns = np.arange(len(chunk))
+            rhs = np.zeros((self.n, len(chunk)))
+            rhs[chunk, columns] = 1.0
+            phi = self._poisson.solve(self._div @ self._unit_gradient(self._heat.solve(rhs)))
+            out[:, start:start + len(chunk)] = phi - phi[chunk, columns]
+        return out
+
+    def distance(self, source: int) -> np.ndarray:
+        """float64 (N,): the field of one source (as a column of :meth:`distances`, without its
+        per-column overhead)."""
+        rhs = np.zeros(self.n)
+        rhs[source] = 1.0
+        phi = self._poisson.solve(self._div @ self._unit_gradient(self._heat.solve(rhs)))
+        return phi - phi[source]
+
+    def _unit_gradient(self, u: np.ndarray) -> np.ndarray:
+        """Per face, grad u / |grad u| (0 where it is 0): (2F,) or (2F, k), x components first."""
+        g = self._grad @ u
+        x, y = g[:len(g) // 2], g[len(g) // 2:]
+        norm = x * x
+        norm += y * y
+        np.sqrt(norm, out=norm)
+        norm[norm <= 0] = 1.0                                 # a zero gradient stays zero
+        np.divide(1.0, norm, out=norm)
+        x *= norm
+        y *= norm
+        return g
+
+
+class HeatDistance(HeatSolver):
     """potpourri3d's robust heat-method distance on one mesh: cover, flips and both factorizations
     once; then :meth:`distances` for any sources, many per solve.
 
@@ -398,45 +465,4 @@ class HeatDistance:
         except ZeroDivisionError:
             raise ValueError("heat method: zero edge length or area after mollification") from None
         self.t = t_coef * (cover.length.sum() / len(cover.length)) ** 2
-        lap, mass, self._grad, self._div = _operators(cover, self.n)
-        if not (np.isfinite(lap.data).all() and np.isfinite(mass).all() and np.isfinite(self.t)):
-            raise ValueError("heat method: non-finite operators (degenerate mesh)")
-        diagonal = np.flatnonzero(lap.indices == np.repeat(np.arange(self.n), np.diff(lap.indptr)))
-        heat, poisson = lap.copy(), lap                       # (M + tL), (L + shift I): same pattern
-        heat.data *= self.t
-        heat.data[diagonal] += mass
-        poisson.data[diagonal] += POISSON_SHIFT
-        try:
-            self._heat, self._poisson = _Factor(heat), _Factor(poisson)
-        except RuntimeError as exc:
-            raise ValueError(f"heat method: cannot factor ({exc})") from None
-
-    def distances(self, sources) -> np.ndarray:
-        """float64 (N, len(sources)): column j is the distance field of ``sources[j]`` alone."""
-        sources = np.atleast_1d(np.asarray(sources, dtype=np.int64))
-        columns = np.arange(len(sources))
-        rhs = np.zeros((self.n, len(sources)))
-        rhs[sources, columns] = 1.0
-        phi = self._poisson.solve(self._div @ self._unit_gradient(self._heat.solve(rhs)))
-        return phi - phi[sources, columns]
-
-    def distance(self, source: int) -> np.ndarray:
-        """float64 (N,): the field of one source (as a column of :meth:`distances`, without its
-        per-column overhead)."""
-        rhs = np.zeros(self.n)
-        rhs[source] = 1.0
-        phi = self._poisson.solve(self._div @ self._unit_gradient(self._heat.solve(rhs)))
-        return phi - phi[source]
-
-    def _unit_gradient(self, u: np.ndarray) -> np.ndarray:
-        """Per face, grad u / |grad u| (0 where it is 0): (2F,) or (2F, k), x components first."""
-        g = self._grad @ u
-        x, y = g[:len(g) // 2], g[len(g) // 2:]
-        norm = x * x
-        norm += y * y
-        np.sqrt(norm, out=norm)
-        norm[norm <= 0] = 1.0                                 # a zero gradient stays zero
-        np.divide(1.0, norm, out=norm)
-        x *= norm
-        y *= norm
-        return g
+        self._factor("heat method", *_operators(cover, self.n))
