@@ -578,7 +578,7 @@ def _query_cloud(model_spec, pretrained, cloud_path, source, output, suffix, exa
     if exact and not mesh_path:
         raise click.UsageError("--exact with a point cloud needs --mesh MESH, the surface it was taken from")
     keep = np.setdiff1d(np.arange(n), far)
-    model = _load_model(model_spec, pretrained, device)
+    model = _load_model(model_spec, pretrained, device, clouds=True)
     normals = None if cloud.normals is None else cloud.normals[keep]
     try:
         emb = model.embed(points[keep], normals=normals, precision=precision)
@@ -662,11 +662,15 @@ def _model_config(spec, pretrained):
         return read_config(path)
 
 
-def _load_model(spec, pretrained, device):
+def _load_model(spec, pretrained, device, clouds: bool = False):
+    """The model, on its device; a point-cloud model only where ``clouds`` (the command takes clouds)."""
     from .model import GeGnn
     from .train import pick_device
 
     model = GeGnn.pretrained(spec) if pretrained else GeGnn.from_checkpoint(spec)
+    if model.config.points and not clouds:
+        raise click.UsageError(f"{spec} is a point-cloud model: it answers gegnn query on a cloud "
+                               "(--source I); this command takes a mesh model")
     return model.to(pick_device(device))
 
 

@@ -144,3 +144,18 @@ def test_a_part_too_small_for_the_heat_method_gets_no_fields():
     lf = cloud_landmark_fields(p, g.part, 4)
     assert len(np.unique(g.part)) == 2
     assert (lf.distances[500:] == 0).all() and (lf.distances[:500].max(axis=0) > 2.5).all()
+
+
+def test_mesh_commands_refuse_a_point_cloud_model(cloud_model, tmp_path):
+    import trimesh
+    from click.testing import CliRunner
+
+    from gegnn.cli import main
+
+    cloud_model.save(tmp_path / "cloud.safetensors")
+    trimesh.creation.icosphere(2).export(tmp_path / "m.obj")
+    for command in (["view", "-o", str(tmp_path / "v.html")], ["pairwise", "-o", str(tmp_path / "d.npy")],
+                    ["texture", "--center", "0", "-o", str(tmp_path / "t.png")]):
+        result = CliRunner().invoke(main, [command[0], str(tmp_path / "cloud.safetensors"), str(tmp_path / "m.obj"),
+                                           *command[1:]])
+        assert result.exit_code == 2 and "is a point-cloud model" in result.output, result.output
