@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import subprocess
 import time
 from importlib.metadata import version
 
@@ -24,26 +23,10 @@ import numpy as np
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
+from bench_gegnn import timed  # noqa: E402  (benchmarks/ is on sys.path when a script there runs)
+from bench_results import cpu_description  # noqa: E402
 from gegnn.cloud_heat import CloudHeatDistance  # noqa: E402
 from gegnn.landmarks import farthest_point_fields  # noqa: E402
-
-
-def cpu() -> str:
-    try:
-        out = subprocess.run(["lscpu"], capture_output=True, text=True, check=True).stdout
-        name = next(line.split(":", 1)[1].strip() for line in out.splitlines() if line.startswith("Model name"))
-    except (OSError, subprocess.CalledProcessError, StopIteration):
-        name = "unknown CPU"
-    return f"{name}, {os.cpu_count()} cores visible, OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS')}"
-
-
-def best(fn, repeat):
-    seconds, out = float("inf"), None
-    for _ in range(repeat):
-        t = time.perf_counter()
-        out = fn()
-        seconds = min(seconds, time.perf_counter() - t)
-    return seconds, out
 
 
 def lower_bound_quality(fields: np.ndarray, pairs: np.ndarray, dist: np.ndarray) -> tuple[float, float]:
@@ -65,26 +48,26 @@ def bench_cloud(name, points, args, pairs=None, dist=None, fps=True):
     rng = np.random.default_rng(0)
     sources = rng.choice(n, size=min(args.sources, n), replace=False)
     row = {"name": name, "n": n}
-    row["pp_setup"], theirs = best(lambda: pp3d.PointCloudHeatSolver(points), args.repeat)
+    row["pp_setup"], theirs = timed(lambda: pp3d.PointCloudHeatSolver(points), args.repeat)
     t = time.perf_counter()
     ref0 = theirs.compute_distance(int(sources[0]))                   # factors both systems
     row["pp_first"] = time.perf_counter() - t
-    row["pp_field"], refs = best(lambda: [theirs.compute_distance(int(s)) for s in sources], args.repeat)
+    row["pp_field"], refs = timed(lambda: [theirs.compute_distance(int(s)) for s in sources], args.repeat)
     row["pp_field"] /= len(sources)
-    row["setup"], ours = best(lambda: CloudHeatDistance(points), args.repeat)
+    row["setup"], ours = timed(lambda: CloudHeatDistance(points), args.repeat)
     ours.distance(int(sources[0]))
-    row["field"], mine = best(lambda: [ours.distance(int(s)) for s in sources], args.repeat)
+    row["field"], mine = timed(lambda: [ours.distance(int(s)) for s in sources], args.repeat)
     row["field"] /= len(sources)
     batch = rng.choice(n, size=min(128, n), replace=False)
-    row["batched"], _ = best(lambda: ours.distances(batch), args.repeat)
+    row["batched"], _ = timed(lambda: ours.distances(batch), args.repeat)
     row["batched"] /= len(batch)
     row["diff"] = max(np.abs(a - b).max() / np.abs(b).max() for a, b in zip(mine, refs))
     del ref0
     if fps:
         k, first = min(args.landmarks, n), int(sources[0])
-        row["pp_fps"], (pp_lm, pp_fields) = best(
+        row["pp_fps"], (pp_lm, pp_fields) = timed(
             lambda: farthest_point_fields(pp3d.PointCloudHeatSolver(points).compute_distance, n, k, first), 1)
-        row["fps"], (lm, fields) = best(
+        row["fps"], (lm, fields) = timed(
             lambda: farthest_point_fields(CloudHeatDistance(points).distance, n, k, first), args.repeat)
         row["same_landmarks"] = lm == pp_lm
         row["fps_diff"] = float(np.abs(fields.astype(np.float64) - pp_fields).max() / np.abs(pp_fields).max())
@@ -131,7 +114,7 @@ def main():
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--clouds", type=int, default=None, help="only the first N validation clouds")
     args = ap.parse_args()
-    print(cpu())
+    print(f"{cpu_description()}, {os.cpu_count()} cores visible, OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS')}")
     print(f"potpourri3d {version('potpourri3d')}; times: ours / potpourri3d")
     if os.path.isdir(args.store):
         from gegnn.data import GeodesicStore

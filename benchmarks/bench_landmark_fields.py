@@ -16,10 +16,11 @@ from __future__ import annotations
 
 import argparse
 import os
-import time
 
 import numpy as np
 import trimesh
+from bench_gegnn import timed  # benchmarks/ is on sys.path when a script there runs
+from bench_results import cpu_description
 
 from gegnn.heat import HeatDistance
 from gegnn.landmarks import T_COEF, _farthest, farthest_point_fields, landmark_fields
@@ -37,21 +38,6 @@ def store_mesh(path):
 
     g = zarr.open_group(path, mode="r")
     return np.asarray(g["vertices"][:], dtype=np.float64), np.asarray(g["faces"][:], dtype=np.int64)
-
-
-def cpu() -> str:
-    info = open("/proc/cpuinfo").read() if os.path.exists("/proc/cpuinfo") else ""
-    names = [line.split(":", 1)[1].strip() for line in info.splitlines() if line.startswith("model name")]
-    return f"{names[0] if names else 'unknown CPU'}, {os.cpu_count()} cores, avx512_bf16: {'avx512_bf16' in info}"
-
-
-def timed(fn, repeat):
-    best, out = float("inf"), None
-    for _ in range(repeat):
-        t = time.perf_counter()
-        out = fn()
-        best = min(best, time.perf_counter() - t)
-    return best, out
 
 
 def potpourri3d_fps(v, f, k, first):
@@ -145,7 +131,7 @@ def main():
         torch.set_num_threads(1)
     except ImportError:
         pass
-    print(f"CPU: {cpu()}; load average {os.getloadavg()[0]:.1f}")
+    print(f"CPU: {cpu_description()}, {os.cpu_count()} cores; load average {os.getloadavg()[0]:.1f}")
     if args.mesh:
         bench_mesh(os.path.basename(args.mesh.rstrip("/")), *store_mesh(args.mesh), args.k, args.batch, args.repeat)
     bench_mesh("torus (trimesh.creation.torus)", *torus_mesh(), args.k, args.batch, args.repeat)

@@ -133,7 +133,7 @@ def _ply_columns(path: Path) -> np.ndarray:
     data = path.read_bytes()
     try:
         loaded = trimesh.load(path, file_type="ply", process=False)
-    except Exception as exc:  # trimesh raises many types for garbage input
+    except Exception:  # trimesh raises many types for garbage input
         raise MeshError("load", explain(data, ".ply") or "the data does not follow the PLY format") from None
     points = np.asarray(getattr(loaded, "vertices", np.zeros((0, 3))), dtype=np.float64)
     raw = loaded.metadata.get("_ply_raw", {}).get("vertex", {}).get("data")  # {property: values}
