@@ -22,6 +22,7 @@ import time
 
 import numpy as np
 import torch
+from bench_results import cpu_description  # benchmarks/ is on sys.path when a script there runs
 
 from gegnn import GeGnn
 from gegnn.data import GeodesicStore
@@ -104,7 +105,8 @@ def main():
                 row["heat"] = mre(heat_method(points, local[ok]), exact[ok])
             rows.append(row)
             print(" ".join(f"{k}={v:.4f}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items()), flush=True)
-    print(f"\n| cloud | points | ours | heat method (potpourri3d) | mesh model on the mesh | embed s |\n|---|---:|---:|---:|---:|---:|")
+    print(f"\n{cpu_description()}, one torch thread\n\n| cloud | points | ours | heat method (potpourri3d) "
+          "| mesh model on the mesh | embed s |\n|---|---:|---:|---:|---:|---:|")
     for kind in args.kinds:
         r = [x for x in rows if x["kind"] == kind]
         heat = f"{100 * np.mean([x['heat'] for x in r]):.2f}%" if "heat" in r[0] else "-"
