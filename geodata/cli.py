@@ -13,7 +13,8 @@ from tqdm.auto import tqdm
 
 from geodata import store
 from geodata.geodesic import BACKENDS as BACKENDS_GEODESIC
-from geodata.parallel import BACKENDS, parallel_map, parse_shard
+from geodata.parallel import BACKENDS, in_shard, parallel_map, parse_shard
+from geodata.subgroup import pending
 
 log = logging.getLogger("geodata")
 library_log = logging.getLogger("geodata.library")  # libraries' warnings: the log file only, once each
@@ -210,7 +211,7 @@ def biharmonic(out, pairs, seed, timeout, retry_failed, jobs, backend, scheduler
     Voronoi mass matrix, from one sparse factorization per mesh. Written under
     meshes/<id>/biharmonic/, whose own status "ok" is written last; reruns skip finished meshes.
     """
-    from geodata.biharmonic_runner import BiharmonicConfig, process_biharmonic, select_biharmonic
+    from geodata.biharmonic_runner import BiharmonicConfig, process_biharmonic
 
     _setup_logging(log_file)
     try:
@@ -218,9 +219,42 @@ def biharmonic(out, pairs, seed, timeout, retry_failed, jobs, backend, scheduler
     except store.StoreError as exc:
         raise click.ClickException(str(exc)) from None
     config = BiharmonicConfig(pairs, seed, timeout)
-    tasks, n_done, n_failed = select_biharmonic(out, shard, retry_failed)
+    tasks, n_done, n_failed = pending(out, "biharmonic", partial(in_shard, shard=shard), retry_failed)
     log.info("biharmonic %s: %d to do, %d already done, %d failed before", out, len(tasks), n_done, n_failed)
     rows = _run(partial(process_biharmonic, out=out, config=config), tasks, "biharmonic", jobs, backend, scheduler)
+    _summary(rows, n_done, n_failed)
+
+
+@main.command()
+@click.argument("out", type=click.Path(exists=True))
+@click.option("--points", "n_points", default=8000, show_default=True, type=click.IntRange(2),
+              help="Surface points per mesh (area-uniform, with interpolated vertex normals).")
+@click.option("--pairs", default=600_000, show_default=True, type=click.IntRange(1),
+              help="Exact pairs per mesh: random source points x every other point of their component.")
+@click.option("--seed", default=0, show_default=True, help="Seed of the points and sources (per mesh: seed + mesh id).")
+@click.option("--timeout", default=1800.0, show_default=True, help="Seconds one mesh may take before it counts as failed.")
+@click.option("--retry-failed", is_flag=True, help="Try again the meshes whose points step failed.")
+@_scale_options
+def points(out, n_points, pairs, seed, timeout, retry_failed, jobs, backend, scheduler, shard, log_file):
+    """Add surface points with exact geodesic distances between them to every committed mesh of store OUT
+    (the data of point-cloud models).
+
+    The points are inserted into the mesh as vertices (the same surface, refined), so the exact solver's
+    distances between them are exact, and a point that falls on a vertex has that vertex's distances.
+    Written under meshes/<id>/points/ (xyz, normals, face, bary, pairs, distances), whose own status "ok"
+    is written last; reruns skip finished meshes.
+    """
+    from geodata.points_runner import PointsConfig, process_points
+
+    _setup_logging(log_file)
+    try:
+        store.open_store(out)
+    except store.StoreError as exc:
+        raise click.ClickException(str(exc)) from None
+    config = PointsConfig(n_points, pairs, seed, timeout)
+    tasks, n_done, n_failed = pending(out, "points", partial(in_shard, shard=shard), retry_failed)
+    log.info("points %s: %d to do, %d already done, %d failed before", out, len(tasks), n_done, n_failed)
+    rows = _run(partial(process_points, out=out, config=config), tasks, "points", jobs, backend, scheduler)
     _summary(rows, n_done, n_failed)
 
 

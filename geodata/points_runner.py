@@ -1,0 +1,47 @@
+"""`geodata points`: add surface points with exact geodesic pairs to the committed meshes of a store."""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import zarr
+
+from geodata.mesh import Mesh, MeshError
+from geodata.parallel import current_stage
+from geodata.point_samples import point_pairs, sample_points
+from geodata.prepare import mesh_rng
+from geodata.subgroup import run_subgroup
+
+__all__ = ["PointsConfig", "process_points"]
+
+
+@dataclass(frozen=True)
+class PointsConfig:
+    points: int = 8000
+    pairs: int = 600_000
+    seed: int = 0
+    timeout: float = 1800.0
+
+
+def _compute(out: str, mesh_id: str, config: PointsConfig) -> tuple[dict, float]:
+    current_stage("points")
+    group = zarr.open_group(f"{out}/meshes/{mesh_id}", mode="r")
+    mesh = Mesh(np.asarray(group["vertices"][:], dtype=np.float64), np.asarray(group["faces"][:], dtype=np.int64))
+    start = time.perf_counter()
+    rng = mesh_rng(config.seed, f"{mesh_id}/points")  # a stream of its own, as reproducible as the others
+    try:
+        samples = sample_points(mesh, config.points, rng)
+    except ValueError as exc:
+        raise MeshError("points", str(exc)) from None
+    pairs, distances = point_pairs(mesh, samples, config.pairs, rng)
+    arrays = {"xyz": samples.xyz.astype(np.float32), "normals": samples.normals.astype(np.float32),
+              "face": samples.face.astype(np.int32), "bary": samples.bary.astype(np.float32),
+              "pairs": pairs.astype(np.uint32), "distances": distances}
+    return arrays, time.perf_counter() - start
+
+
+def process_points(task: tuple[str, str], out: str, config: PointsConfig) -> dict:
+    """Compute and commit one mesh's points and their pairs, or record why not in meshes/<id>/points."""
+    return run_subgroup(task, out, "points", _compute, config, {"points": config.points,
+                                                                "pairs_requested": config.pairs, "seed": config.seed})
