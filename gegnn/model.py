@@ -217,7 +217,7 @@ class GeGnn(nn.Module):
         else:
             if faces is None:
                 raise ValueError("this model embeds meshes: give faces, or use a point-cloud model "
-                                 "(GeGnn.pretrained('points'))")
+                                 "(trained with gegnn train --points)")
             (h, fields, scale), expand = self.inputs(vertices, faces, device), None
         was_training = self.training
         self.eval()
