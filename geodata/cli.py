@@ -213,15 +213,20 @@ def biharmonic(out, pairs, seed, timeout, retry_failed, jobs, backend, scheduler
     """
     from geodata.biharmonic_runner import BiharmonicConfig, process_biharmonic
 
+    _add_subgroup(out, "biharmonic", process_biharmonic, BiharmonicConfig(pairs, seed, timeout), retry_failed, jobs,
+                  backend, scheduler, shard, log_file)
+
+
+def _add_subgroup(out, subgroup, process, config, retry_failed, jobs, backend, scheduler, shard, log_file) -> None:
+    """Run ``process`` on this shard's committed meshes still without ``subgroup``, with a summary."""
     _setup_logging(log_file)
     try:
         store.open_store(out)
     except store.StoreError as exc:
         raise click.ClickException(str(exc)) from None
-    config = BiharmonicConfig(pairs, seed, timeout)
-    tasks, n_done, n_failed = pending(out, "biharmonic", partial(in_shard, shard=shard), retry_failed)
-    log.info("biharmonic %s: %d to do, %d already done, %d failed before", out, len(tasks), n_done, n_failed)
-    rows = _run(partial(process_biharmonic, out=out, config=config), tasks, "biharmonic", jobs, backend, scheduler)
+    tasks, n_done, n_failed = pending(out, subgroup, partial(in_shard, shard=shard), retry_failed)
+    log.info("%s %s: %d to do, %d already done, %d failed before", subgroup, out, len(tasks), n_done, n_failed)
+    rows = _run(partial(process, out=out, config=config), tasks, subgroup, jobs, backend, scheduler)
     _summary(rows, n_done, n_failed)
 
 
@@ -246,16 +251,8 @@ def points(out, n_points, pairs, seed, timeout, retry_failed, jobs, backend, sch
     """
     from geodata.points_runner import PointsConfig, process_points
 
-    _setup_logging(log_file)
-    try:
-        store.open_store(out)
-    except store.StoreError as exc:
-        raise click.ClickException(str(exc)) from None
-    config = PointsConfig(n_points, pairs, seed, timeout)
-    tasks, n_done, n_failed = pending(out, "points", partial(in_shard, shard=shard), retry_failed)
-    log.info("points %s: %d to do, %d already done, %d failed before", out, len(tasks), n_done, n_failed)
-    rows = _run(partial(process_points, out=out, config=config), tasks, "points", jobs, backend, scheduler)
-    _summary(rows, n_done, n_failed)
+    _add_subgroup(out, "points", process_points, PointsConfig(n_points, pairs, seed, timeout), retry_failed, jobs,
+                  backend, scheduler, shard, log_file)
 
 
 @main.command()

@@ -1,16 +1,12 @@
 """`geodata points`: add surface points with exact geodesic pairs to the committed meshes of a store."""
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 
 import numpy as np
-import zarr
 
 from geodata.mesh import Mesh, MeshError
-from geodata.parallel import current_stage
 from geodata.point_samples import point_pairs, sample_points
-from geodata.prepare import mesh_rng
 from geodata.subgroup import run_subgroup
 
 __all__ = ["PointsConfig", "process_points"]
@@ -24,21 +20,15 @@ class PointsConfig:
     timeout: float = 1800.0
 
 
-def _compute(out: str, mesh_id: str, config: PointsConfig) -> tuple[dict, float]:
-    current_stage("points")
-    group = zarr.open_group(f"{out}/meshes/{mesh_id}", mode="r")
-    mesh = Mesh(np.asarray(group["vertices"][:], dtype=np.float64), np.asarray(group["faces"][:], dtype=np.int64))
-    start = time.perf_counter()
-    rng = mesh_rng(config.seed, f"{mesh_id}/points")  # a stream of its own, as reproducible as the others
+def _compute(mesh: Mesh, rng: np.random.Generator, config: PointsConfig) -> dict:
     try:
         samples = sample_points(mesh, config.points, rng)
     except ValueError as exc:
         raise MeshError("points", str(exc)) from None
     pairs, distances = point_pairs(mesh, samples, config.pairs, rng)
-    arrays = {"xyz": samples.xyz.astype(np.float32), "normals": samples.normals.astype(np.float32),
-              "face": samples.face.astype(np.int32), "bary": samples.bary.astype(np.float32),
-              "pairs": pairs.astype(np.uint32), "distances": distances}
-    return arrays, time.perf_counter() - start
+    return {"xyz": samples.xyz.astype(np.float32), "normals": samples.normals.astype(np.float32),
+            "face": samples.face.astype(np.int32), "bary": samples.bary.astype(np.float32),
+            "pairs": pairs.astype(np.uint32), "distances": distances}
 
 
 def process_points(task: tuple[str, str], out: str, config: PointsConfig) -> dict:

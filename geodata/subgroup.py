@@ -5,9 +5,12 @@ from __future__ import annotations
 
 import time
 
+import zarr
+
 from geodata import store
-from geodata.mesh import MeshError
-from geodata.parallel import run_isolated
+from geodata.mesh import Mesh, MeshError
+from geodata.parallel import current_stage, run_isolated
+from geodata.prepare import mesh_rng
 
 __all__ = ["pending", "run_subgroup"]
 
@@ -23,15 +26,16 @@ def pending(out, subgroup: str, keep=None, retry_failed: bool = False) -> tuple[
 
 
 def run_subgroup(task: tuple[str, str], out: str, subgroup: str, compute, config, attrs: dict) -> dict:
-    """``compute(out, mesh_id, config) -> (arrays, seconds)`` for one mesh in an isolated process (within
-    ``config.timeout``), written to meshes/<id>/<subgroup> with ``attrs`` and committed; a MeshError is
-    recorded there instead. Returns the run's summary row."""
+    """``compute(mesh, rng, config) -> arrays`` for one committed mesh in an isolated process (within
+    ``config.timeout``; ``rng``: the mesh's own stream for this subgroup), written to
+    meshes/<id>/<subgroup> with ``attrs`` and committed; a MeshError is recorded there instead. Returns the
+    run's summary row."""
     mesh_id, source = task
     start = time.perf_counter()
     row = {"mesh_id": mesh_id, "source": source, "warnings": []}
     path = f"meshes/{mesh_id}/{subgroup}"
     try:
-        arrays, seconds = run_isolated(compute, out, mesh_id, config, timeout=config.timeout,
+        arrays, seconds = run_isolated(_in_child, compute, out, mesh_id, subgroup, config, timeout=config.timeout,
                                        warnings_out=row["warnings"])
     except MeshError as exc:
         store.write_group(out, path, {}, {"status": "failed", "stage": exc.stage, "error": exc.reason})
@@ -40,3 +44,14 @@ def run_subgroup(task: tuple[str, str], out: str, subgroup: str, compute, config
     store.write_group(out, path, arrays, {**attrs, "seconds": round(seconds, 4)})
     store.commit(out, path)
     return {**row, "status": "ok", "timings": {subgroup: seconds}, "seconds": time.perf_counter() - start}
+
+
+def _in_child(compute, out: str, mesh_id: str, subgroup: str, config) -> tuple[dict, float]:
+    """The isolated process's part: the committed mesh, its random stream for ``subgroup`` (distinct from
+    the geodesic one and from other subgroups', as reproducible), ``compute`` timed."""
+    current_stage(subgroup)
+    group = zarr.open_group(f"{out}/meshes/{mesh_id}", mode="r")
+    mesh = Mesh(group["vertices"][:], group["faces"][:])
+    start = time.perf_counter()
+    arrays = compute(mesh, mesh_rng(config.seed, f"{mesh_id}/{subgroup}"), config)
+    return arrays, time.perf_counter() - start
