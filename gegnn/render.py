@@ -249,7 +249,7 @@ def shade_points(points, field, view: View, *, normals=None, size=512, cmap="vir
 
     xy, depth = project(points, view, points, size)
     plane = (points - view.center) @ view.rotation[:2].T
-    pixels_per_unit = (1 - 2 * 0.05) * size / max(np.ptp(plane, axis=0).max(), 1e-12)  # as project's margin
+    pixels_per_unit = np.ptp(xy, axis=0).max() / max(np.ptp(plane, axis=0).max(), 1e-12)  # project's scale
     # The spacing: half the distance to the 8th nearest point (robust to duplicates and near-duplicates).
     spacing = 0.5 * np.median(cKDTree(points).query(points, 9)[0][:, -1]) if len(points) > 8 else 0.0
     r = max(1.0, 0.9 * spacing * pixels_per_unit)
