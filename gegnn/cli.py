@@ -267,7 +267,7 @@ def query(files, pretrained, source, pairs_csv, points_file, output, exact, clou
     src = int(net_pairs[0, 0])
     config = _model_config(model_spec, pretrained)
     kind = config.distance
-    exact_d = None
+    exact_d = err = None
     if exact and source is not None:  # before the network: the exact solver runs in a forked child
         from .query import exact_field
         try:
@@ -317,24 +317,13 @@ def query(files, pretrained, source, pairs_csv, points_file, output, exact, clou
     if suffix == ".npy":
         np.save(output, qm.to_file(field))
     elif suffix == ".ply":
-        import matplotlib
         import trimesh
-
-        from .render import UNREACHABLE
-        colors = matplotlib.colormaps["viridis"](np.nan_to_num(field / max(top, 1e-30)))
-        colors[~on] = UNREACHABLE
-        trimesh.Trimesh(qm.mesh.vertices, qm.mesh.faces, vertex_colors=(colors * 255).astype(np.uint8),
+        trimesh.Trimesh(qm.mesh.vertices, qm.mesh.faces, vertex_colors=_field_colors(field, top),
                         process=False).export(output)
     elif suffix == ".png":
-        from .render import Panel, Row, save_panels
-
-        panels = [Panel(field, "predicted", vmin=0, vmax=top)]
-        if exact_d is not None:
-            panels += [Panel(exact_d, "exact", vmin=0, vmax=top),
-                       Panel(np.where(np.isnan(err) & on, 0.0, err), "relative error", "magma",
-                             "|pred - exact| / exact", 0, 0.1, isolines=0)]
-        save_panels(output, [Row(qm.mesh.vertices, qm.mesh.faces, src, panels, lines)], suptitle=title,
-                    size=size, up=up)
+        from .render import Row, save_panels
+        save_panels(output, [Row(qm.mesh.vertices, qm.mesh.faces, src, _field_panels(field, exact_d, err, src, top),
+                                 lines)], suptitle=title, size=size, up=up)
     if output:
         click.echo(f"written {output}")
 
@@ -556,7 +545,7 @@ def _query_cloud(model_spec, pretrained, cloud_path, source, output, suffix, exa
     from geodata.stages.cloud import load_cloud_file, outliers
 
     from .pointcloud import graph_parts, knn_edges
-    from .train import METRIC_EPS
+    from .query import relative_errors
 
     name = Path(cloud_path).name
     try:
@@ -593,7 +582,7 @@ def _query_cloud(model_spec, pretrained, cloud_path, source, output, suffix, exa
     click.echo(f"{name}: {n} points{'' if cloud.normals is None else ' with normals'}; {n_parts} part(s) in the "
                f"{model.config.points}-neighbour graph; {model.config.distance} distance from point {source}: "
                f"min {np.nanmin(field):.4g} max {np.nanmax(field):.4g}")
-    exact_d = None
+    exact_d = err = None
     if exact:
         from .query import exact_at_points, load_query_mesh
         try:
@@ -601,33 +590,21 @@ def _query_cloud(model_spec, pretrained, cloud_path, source, output, suffix, exa
             exact_d, offset = exact_at_points(qm.mesh, points, source, model.config.distance)
         except MeshError as exc:
             raise click.ClickException(f"{mesh_path}: --exact: {exc.reason}") from None
-        err = np.abs(field - exact_d) / (exact_d + METRIC_EPS * qm.scale)
-        err[source] = np.nan
+        err = relative_errors(field, exact_d, qm.scale, source)
         click.echo(f"mean relative error vs exact on {Path(mesh_path).name}: {100 * np.nanmean(err):.2f}% (median "
                    f"{100 * np.nanmedian(err):.2f}%; the points lie within {offset.max():.3g} of the surface)")
     top = float(np.nanmax(exact_d if exact_d is not None else field))
     if suffix == ".npy":
         np.save(output, field)
     elif suffix == ".ply":
-        import matplotlib
         import trimesh
-
-        from .render import UNREACHABLE
-        colors = matplotlib.colormaps["viridis"](np.nan_to_num(field / max(top, 1e-30)))
-        colors[np.isnan(field)] = UNREACHABLE
-        trimesh.PointCloud(points, colors=(colors * 255).astype(np.uint8)).export(output)
+        trimesh.PointCloud(points, colors=_field_colors(field, top)).export(output)
     elif suffix == ".png":
-        from .render import Panel, Row, save_panels
-
-        panels = [Panel(field, "predicted", vmin=0, vmax=top)]
-        if exact_d is not None:
-            panels += [Panel(exact_d, "exact", vmin=0, vmax=top),
-                       Panel(np.where(np.isnan(err), 0.0, err), "relative error", "magma", "|pred - exact| / exact",
-                             0, 0.1, isolines=0)]
         from .pointcloud import pca_normals
+        from .render import Row, save_panels
         lit = cloud.normals if cloud.normals is not None else pca_normals(points, knn_edges(points, 8)[1])
-        save_panels(output, [Row(points, None, source, panels, normals=lit)], size=size, up=up,
-                    suptitle=f"{name}, point {source}")
+        save_panels(output, [Row(points, None, source, _field_panels(field, exact_d, err, source, top), normals=lit)],
+                    size=size, up=up, suptitle=f"{name}, point {source}")
     if output:
         click.echo(f"written {output}")
 
@@ -660,6 +637,31 @@ def _model_config(spec, pretrained):
         return read_config(spec)
     with pretrained_file(spec) as path:
         return read_config(path)
+
+
+def _field_colors(field, top: float):
+    """RGBA uint8 (N, 4) of a per-vertex field for a coloured PLY: viridis over [0, top], grey where NaN."""
+    import matplotlib
+    import numpy as np
+
+    from .render import UNREACHABLE
+    colors = matplotlib.colormaps["viridis"](np.nan_to_num(field / max(top, 1e-30)))
+    colors[np.isnan(field)] = UNREACHABLE
+    return (colors * 255).astype(np.uint8)
+
+
+def _field_panels(field, exact_d, err, source: int, top: float) -> list:
+    """The panels of a query's picture: predicted, and with an exact field, exact and the relative error
+    (0 at the source; NaN, grey, where there is no distance)."""
+    from .render import Panel
+
+    panels = [Panel(field, "predicted", vmin=0, vmax=top)]
+    if exact_d is not None:
+        shown = err.copy()
+        shown[source] = 0.0
+        panels += [Panel(exact_d, "exact", vmin=0, vmax=top),
+                   Panel(shown, "relative error", "magma", "|pred - exact| / exact", 0, 0.1, isolines=0)]
+    return panels
 
 
 def _load_model(spec, pretrained, device, clouds: bool = False):

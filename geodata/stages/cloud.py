@@ -1,8 +1,8 @@
 """Point-cloud files to validated points (and normals where the file has them).
 
 Formats: ``.xyz``/``.txt``/``.pts``/``.csv`` (one point a line: x y z, or x y z nx ny nz; with other counts
-x y z are the first three; separators spaces, tabs or commas; a header line and ``#`` comments allowed), ``.npy`` ((N, 3) or (N, 6)
-numbers), ``.ply`` (the vertex element's x, y, z and, where present, nx, ny, nz; faces are ignored). Every
+x y z are the first three; separators spaces, tabs or commas; a header line and ``#`` comments
+allowed), ``.npy`` ((N, 3) or more columns, the same way), ``.ply`` (the vertex element's x, y, z and, where present, nx, ny, nz; faces are ignored). Every
 failure is a MeshError("load", reason) in the file's terms: which line, which value.
 
 Defined behaviour for what scans hold: exact duplicates are kept (the model merges them and gives them
@@ -60,8 +60,8 @@ def load_cloud_file(path) -> PointCloud:
         length = np.linalg.norm(normals, axis=1)
         bad = ~np.isfinite(length) | (length < 1e-12)
         if bad.any():
-            cloud.notes.append(f"{int(bad.sum())} normals are zero or not finite (the first at point {int(np.argmax(bad))}): "
-                               "normals estimated from the points instead")
+            cloud.notes.append(f"{int(bad.sum())} normals are zero or not finite (the first at point "
+                               f"{int(np.argmax(bad))}): normals estimated from the points instead")
         else:
             cloud.normals = normals / length[:, None]
     return cloud
