@@ -66,9 +66,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import scipy.sparse as sp
 
-from .heat import DELAUNAY_EPS, HeatSolver, _Cover, _cotan_halves, relink
+from .heat import DELAUNAY_EPS, HeatSolver, _Cover, _cotan_halves, gradient_divergence, laplacian, relink
 
 __all__ = ["CloudHeatDistance", "K_NEIGHBORS"]
 
@@ -785,24 +784,10 @@ def _operators(cover: _Cover, n: int):
     vec[:, 0, 0], vec[:, 0, 1] = la, 0.0
     vec[:, 1, 0], vec[:, 1, 1] = wide - la, height
     vec[:, 2, 0], vec[:, 2, 1] = -wide, -height
-    w = (weight[:, None] * half).ravel()
-    tail = corner.ravel()
-    tip = corner[:, [1, 2, 0]].ravel()
-    diagonal = np.bincount(tail, w, minlength=n) + np.bincount(tip, w, minlength=n)
-    lap = sp.csr_matrix((np.concatenate([-w, -w, diagonal]), (np.concatenate([tail, tip, np.arange(n)]),
-                                                              np.concatenate([tip, tail, np.arange(n)]))), shape=(n, n))
-    lap.sum_duplicates()
-    lap = sp.csc_matrix((lap.data, lap.indices, lap.indptr), shape=(n, n))   # symmetric: CSR = CSC
-    mass = np.bincount(tail, np.repeat(weight * (area / 3.0), 3), minlength=n)
-    cols = np.tile(tail, 2)
-    rows = np.arange(0, len(cols) + 1, 3)
-    shape = (2 * len(h), n)
-    nv = np.roll(vec, -1, axis=1)                             # grad u ~ sum_h rot90(vec[next h]) u[tail h]
-    grad = sp.csr_matrix((np.concatenate([-nv[..., 1].ravel(), nv[..., 0].ravel()]), cols, rows), shape=shape)
-    wv = (weight[:, None] * half)[..., None] * vec            # div X: +-w_h <vec h, X> at tail / tip of h
-    c = wv - np.roll(wv, 1, axis=1)
-    div_t = sp.csr_matrix((np.concatenate([c[..., 0].ravel(), c[..., 1].ravel()]), cols, rows), shape=shape)
-    return lap, mass, grad, div_t.T.tocsr()
+    whalf = weight[:, None] * half
+    lap = laplacian(corner.ravel(), corner[:, [1, 2, 0]].ravel(), whalf.ravel(), n)
+    mass = np.bincount(corner.ravel(), np.repeat(weight * (area / 3.0), 3), minlength=n)
+    return (lap, mass, *gradient_divergence(corner, vec, whalf, n))
 
 
 def _distinct_faces(cover: _Cover, h: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:

@@ -307,27 +307,39 @@ def _operators(cover: _Cover, n: int):
     faces (:func:`_distinct_faces`)."""
     area, half = _cotan_halves(cover)
     e, s = cover.e_he, cover.sib[cover.e_he]
-    w = half[e] + half[s]
-    a, b = cover.vert[e], cover.vert[cover.nxt[e]]
-    diagonal = np.bincount(a, w, minlength=n) + np.bincount(b, w, minlength=n)
-    lap = sp.csr_matrix((np.concatenate([-w, -w, diagonal]), (np.concatenate([a, b, np.arange(n)]),
-                                                              np.concatenate([b, a, np.arange(n)]))), shape=(n, n))
-    lap.sum_duplicates()
-    lap = sp.csc_matrix((lap.data, lap.indices, lap.indptr), shape=(n, n))   # symmetric: CSR = CSC
+    lap = laplacian(cover.vert[e], cover.vert[cover.nxt[e]], half[e] + half[s], n)
     mass = np.bincount(cover.vert, weights=(area / 3.0)[cover.face], minlength=n)
     h = np.stack([cover.f_he, cover.nxt[cover.f_he], cover.nxt[cover.nxt[cover.f_he]]], 1)   # (2F, 3)
     keep, weight = _distinct_faces(cover, h)
     h = h[keep]
-    vec = _halfedge_vectors(cover, area)[h]                   # (F', 3, 2)
-    cols = np.tile(cover.vert[h].ravel(), 2)
+    return (lap, mass, *gradient_divergence(cover.vert[h], _halfedge_vectors(cover, area)[h],
+                                            weight[:, None] * half[h], n))
+
+
+def laplacian(tail: np.ndarray, tip: np.ndarray, w: np.ndarray, n: int) -> sp.csc_matrix:
+    """The symmetric (N, N) matrix with -w on (tail, tip) and (tip, tail) and the row sums on the diagonal,
+    repeated entries summed (a cotangent Laplacian from its edge weights)."""
+    diagonal = np.bincount(tail, w, minlength=n) + np.bincount(tip, w, minlength=n)
+    lap = sp.csr_matrix((np.concatenate([-w, -w, diagonal]), (np.concatenate([tail, tip, np.arange(n)]),
+                                                              np.concatenate([tip, tail, np.arange(n)]))),
+                        shape=(n, n))
+    lap.sum_duplicates()
+    return sp.csc_matrix((lap.data, lap.indices, lap.indptr), shape=(n, n))   # symmetric: CSR = CSC
+
+
+def gradient_divergence(corner: np.ndarray, vec: np.ndarray, whalf: np.ndarray, n: int):
+    """Per-face gradient (2F x N: the unnormalized gradient direction, x components then y) and divergence
+    (N x 2F) of faces with corner vertices (F, 3), halfedge vectors in their layout (F, 3, 2) and weighted
+    half-cotangents (F, 3), halfedge k running from corner k to corner k + 1."""
+    cols = np.tile(corner.ravel(), 2)
     rows = np.arange(0, len(cols) + 1, 3)                    # three corners a row
-    shape = (2 * len(h), n)
+    shape = (2 * len(corner), n)
     nv = np.roll(vec, -1, axis=1)                             # grad u ~ sum_h rot90(vec[next h]) u[tail h]
     grad = sp.csr_matrix((np.concatenate([-nv[..., 1].ravel(), nv[..., 0].ravel()]), cols, rows), shape=shape)
-    wv = (weight[:, None] * half[h])[..., None] * vec         # div X: +-w_h <vec h, X> at tail / tip of h
+    wv = whalf[..., None] * vec                               # div X: +-w_h <vec h, X> at tail / tip of h
     c = wv - np.roll(wv, 1, axis=1)
     div_t = sp.csr_matrix((np.concatenate([c[..., 0].ravel(), c[..., 1].ravel()]), cols, rows), shape=shape)
-    return lap, mass, grad, div_t.T.tocsr()
+    return grad, div_t.T.tocsr()
 
 
 def _distinct_faces(cover: _Cover, h: np.ndarray, rtol: float = 1e-12) -> tuple[np.ndarray, np.ndarray]:
