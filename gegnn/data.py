@@ -181,8 +181,9 @@ class BatchDataset(torch.utils.data.Dataset):
             augmentation; validation uses seed 0, as ``GeGnn.embed`` does.
         field_cache: a :class:`gegnn.fields.FieldCache` path the fields are read from (training fills it
             first); fields missing there, or without a cache, are computed per use.
-        cloud: for a point-cloud model, k: each mesh's vertices are read as a point cloud, its graph and
-            normals made from them alone (:func:`gegnn.pointcloud.cloud_graph`); 0: the mesh's own.
+        cloud: for a point-cloud model, k: each mesh's vertices are read as a point cloud, its projected
+            points, graph and normals made from them alone (:func:`gegnn.pointcloud.cloud_graph`); 0: the
+            mesh's own.
     """
 
     def __init__(self, store_path, distance, seed, num_pairs, rotate, levels, sigma_c, sigma_n,
@@ -219,13 +220,14 @@ class BatchDataset(torch.utils.data.Dataset):
 
     def geometry(self, mesh_id: str) -> MeshGeometry:
         """The mesh's geometry, kept: ~200 kB per 5k-vertex mesh; pairs (~7 MB) are read per use. For a
-        point-cloud model, the graph and normals of its vertices alone (faces kept: the field cache's key)."""
+        point-cloud model, the projected points, graph and normals of its vertices alone (faces kept: the
+        field cache's key)."""
         if mesh_id not in self._geometries:
             g = self.store.geometry(mesh_id)
             if self.cloud:
                 from .pointcloud import cloud_graph
                 c = cloud_graph(g.vertices.astype(np.float64), self.cloud)
-                g = MeshGeometry(g.vertices, c.normals.astype(np.float32), c.edges, g.faces)
+                g = MeshGeometry(c.points.astype(np.float32), c.normals.astype(np.float32), c.edges, g.faces)
             self._geometries[mesh_id] = g
         return self._geometries[mesh_id]
 

@@ -73,8 +73,8 @@ class FieldSpec:
         return f"k{self.size}" + (f"-cloud{self.cloud}" if self.cloud else "")
 
     def compute(self, vertices: np.ndarray, faces: np.ndarray, seed: int = 0) -> np.ndarray:
-        """The fields of one mesh, float32 (N, K) or (N, m + 1); of its vertices as a point cloud (faces
-        unused) for a point-cloud model."""
+        """The fields of one mesh, float32 (N, K) or (N, m + 1); for a point-cloud model, of its vertices as
+        a point cloud (faces unused), the points of :func:`gegnn.pointcloud.cloud_graph` (projected)."""
         if self.cloud:
             from .pointcloud import cloud_landmark_fields, graph_parts, knn_edges
             part = graph_parts(len(vertices), knn_edges(vertices, self.cloud)[0])

@@ -263,10 +263,10 @@ class GeGnn(nn.Module):
         center, scale = normalization(distinct)
         p = (distinct - center) / scale
         g = cloud_graph(p, self.config.points, normals)
-        graph = self.mesh_graph(p, g.normals.astype(np.float32), g.edges)
+        graph = self.mesh_graph(g.points, g.normals.astype(np.float32), g.edges)
         spec = FieldSpec.of(self.config)
-        fields = None if spec is None else torch.as_tensor(cloud_landmark_fields(p, g.part, spec.size).distances,
-                                                           device=device)
+        fields = None if spec is None else torch.as_tensor(
+            cloud_landmark_fields(g.points, g.part, spec.size).distances, device=device)
         return self.hierarchy(graph).to(device), fields, scale, expand.reshape(-1)
 
     def finetune(self, vertices: np.ndarray, faces: np.ndarray, **options):

@@ -8,7 +8,7 @@ import pytest
 from gegnn_stores import small_config
 
 from gegnn import GeGnn
-from gegnn.pointcloud import cloud_graph, cloud_landmark_fields, knn_edges
+from gegnn.pointcloud import cloud_graph, cloud_landmark_fields, knn_edges, mls_project
 
 
 def fibonacci_sphere(n: int, center=(0.0, 0.0, 0.0), radius: float = 1.0) -> np.ndarray:
@@ -26,6 +26,24 @@ def test_knn_edges_are_each_pair_once_and_hold_every_points_neighbours():
     np.testing.assert_array_equal(np.sort(nbrs, axis=1), np.sort(brute, axis=1))
     have = set(map(tuple, edges.tolist()))
     assert all((min(i, j), max(i, j)) in have for i in range(len(p)) for j in brute[i])
+
+
+def test_mls_projection_keeps_quadrics_and_takes_noise_out():
+    rng = np.random.default_rng(1)
+    xy = rng.uniform(-1, 1, size=(1500, 2))
+    paraboloid = np.c_[xy, 0.3 * xy[:, 0] ** 2 - 0.2 * xy[:, 0] * xy[:, 1] + 0.1 * xy[:, 1] ** 2]
+    # spacing ~0.05: a curved surface moves by 1e-3 of it, a plane in any pose not at all
+    np.testing.assert_allclose(mls_project(paraboloid), paraboloid, atol=1e-4)
+    plane = np.c_[xy, np.zeros(1500)] @ np.linalg.qr(rng.normal(size=(3, 3)))[0] + (1.0, -2.0, 0.5)
+    np.testing.assert_allclose(mls_project(plane), plane, atol=1e-12)
+    sphere = fibonacci_sphere(3000)
+    assert np.abs(np.linalg.norm(mls_project(sphere), axis=1) - 1).max() < 1e-4
+    noisy = sphere * (1 + rng.normal(scale=0.01, size=(3000, 1)))
+    before = np.abs(np.linalg.norm(noisy, axis=1) - 1).mean()
+    after = np.abs(np.linalg.norm(mls_project(noisy), axis=1) - 1).mean()
+    assert after < 0.5 * before
+    line = np.c_[np.linspace(0, 1, 40), np.zeros((40, 2))]  # no surface to fit: the points stay
+    np.testing.assert_array_equal(mls_project(line), line)
 
 
 def test_normals_are_radial_and_outward_on_each_of_two_spheres():
@@ -47,6 +65,21 @@ def test_landmark_fields_of_a_sphere_are_great_circle_distances():
     assert np.mean(np.abs(lf.distances[far] - exact[far]) / exact[far]) < 0.03
     # farthest-point sampling: the second landmark is (near) the antipode of the first
     assert exact[lf.landmarks[0][1], 0] > 0.95 * np.pi
+
+
+def test_the_projection_takes_the_noise_out_of_a_noisy_spheres_distances():
+    """Noise of 2% of the radius lengthens the heat method's distances by ~4.6% (their zigzag); on the
+    projected points they are within 0.3% of the clean cloud's (whose own bias, -1.2%, is the method's)."""
+    p = fibonacci_sphere(2000)
+    noisy = p * (1 + np.random.default_rng(2).normal(scale=0.02, size=(2000, 1)))
+    bias = []
+    for q in (p, noisy, cloud_graph(noisy, 8).points):
+        lf = cloud_landmark_fields(q, np.zeros(2000, dtype=np.int64), 8, seed=3)
+        exact = np.arccos(np.clip(p @ p[lf.landmarks[0]].T, -1, 1))
+        far = exact > 0.2
+        bias.append(np.mean((lf.distances[far] - exact[far]) / exact[far]))
+    clean, raw, projected = bias
+    assert raw - clean > 0.03 and abs(projected - clean) < 0.2 * (raw - clean)
 
 
 @pytest.fixture(scope="module")
