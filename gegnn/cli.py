@@ -923,23 +923,36 @@ def shape_distribution(files, pretrained, pairs, bins, seed, output, device):
 @click.argument("checkpoint", type=click.Path(exists=True, dir_okay=False))
 @click.argument("output", type=click.Path(dir_okay=False))
 @click.option("--dtype", type=click.Choice(["fp16", "bf16", "fp32"]), default="fp16", show_default=True)
-def export(checkpoint, output, dtype):
+@click.option("--points", type=click.IntRange(min=1), metavar="K",
+              help="Export a landmark mesh model as a point-cloud model of the same weights (graph of the K "
+                   "nearest neighbours; the network reads any graph with positions and normals).")
+def export(checkpoint, output, dtype, points):
     """Weights-only copy of CHECKPOINT for shipping: no optimizer or RNG state, weights in DTYPE.
 
     Keeps the config and the training metadata (epoch, metrics, options)."""
+    import dataclasses
+
     import torch
 
     from .checkpoint import load_checkpoint, save_checkpoint
     from .model import GeGnn
 
     ckpt = load_checkpoint(checkpoint)
-    model = GeGnn(ckpt.config)
+    config = ckpt.config
+    if points is not None:
+        if not config.landmarks:
+            raise click.UsageError(f"--points: {Path(checkpoint).name} is not a landmark model (a point-cloud "
+                                   "model reads landmark fields)")
+        config = dataclasses.replace(config, points=points)
+    model = GeGnn(config)
     model.load_state_dict(ckpt.model_state)
     torch_dtype = {"fp16": torch.float16, "bf16": torch.bfloat16, "fp32": torch.float32}[dtype]
+    extra = {} if points is None else {"points_from": f"{Path(checkpoint).name}, weights as they are"}
     save_checkpoint(output, model, metadata={**ckpt.metadata, "exported_from": Path(checkpoint).name,
-                                             "dtype": dtype}, dtype=torch_dtype)
+                                             "dtype": dtype, **extra}, dtype=torch_dtype)
     click.echo(f"{output}: {Path(output).stat().st_size / 2**20:.2f} MiB, "
-               f"{sum(p.numel() for p in model.parameters()):,} parameters in {dtype}")
+               f"{sum(p.numel() for p in model.parameters()):,} parameters in {dtype}"
+               + ("" if points is None else f"; a point-cloud model ({points} neighbours)"))
 
 
 if __name__ == "__main__":

@@ -192,3 +192,26 @@ def test_mesh_commands_refuse_a_point_cloud_model(cloud_model, tmp_path):
         result = CliRunner().invoke(main, [command[0], str(tmp_path / "cloud.safetensors"), str(tmp_path / "m.obj"),
                                            *command[1:]])
         assert result.exit_code == 2 and "is a point-cloud model" in result.output, result.output
+
+
+def test_export_points_turns_a_landmark_mesh_model_into_a_cloud_model_of_the_same_weights(tmp_path):
+    import torch
+    from click.testing import CliRunner
+
+    from gegnn.cli import main
+
+    torch.manual_seed(1)
+    mesh_model = GeGnn(small_config(landmarks=8))
+    mesh_model.save(tmp_path / "mesh.safetensors")
+    result = CliRunner().invoke(main, ["export", str(tmp_path / "mesh.safetensors"), str(tmp_path / "cloud.safetensors"),
+                                       "--points", "6", "--dtype", "fp32"])
+    assert result.exit_code == 0 and "a point-cloud model (6 neighbours)" in result.output, result.output
+    cloud = GeGnn.from_checkpoint(tmp_path / "cloud.safetensors")
+    assert cloud.config.points == 6 and cloud.config.landmarks == 8
+    for name, tensor in mesh_model.state_dict().items():
+        torch.testing.assert_close(cloud.state_dict()[name], tensor, rtol=0, atol=0)
+    assert np.isfinite(cloud.embed(fibonacci_sphere(300)).field(0)).all()
+    GeGnn(small_config()).save(tmp_path / "paper.safetensors")
+    result = CliRunner().invoke(main, ["export", str(tmp_path / "paper.safetensors"), str(tmp_path / "x.safetensors"),
+                                       "--points", "6"])
+    assert result.exit_code == 2 and "paper.safetensors is not a landmark model" in result.output
