@@ -27,6 +27,7 @@ PRETRAINED = {
     "landmark": "gegnn-landmark-v1.safetensors",  # landmark-guided, the most accurate
     "paper": "gegnn-classic-v1.safetensors",      # the paper's model (no landmarks)
     "biharmonic": "gegnn-biharmonic-v1.safetensors",  # biharmonic distances: spectral codes + Weyl tail
+    "points": "gegnn-points-v1.safetensors",      # point clouds: the landmark model's weights on a kNN graph
 }
 
 
@@ -287,7 +288,8 @@ class GeGnn(nn.Module):
 
         Args:
             name: a key of :data:`PRETRAINED`: ``"landmark"`` (the default: the most accurate geodesic
-                model), ``"paper"`` (the paper's model) or ``"biharmonic"`` (biharmonic distances).
+                model), ``"paper"`` (the paper's model), ``"biharmonic"`` (biharmonic distances) or
+                ``"points"`` (point clouds: ``model.embed(points)``).
         """
         with pretrained_file(name) as path:
             return cls.from_checkpoint(path, map_location)

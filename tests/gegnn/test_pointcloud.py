@@ -215,3 +215,4 @@ def test_export_points_turns_a_landmark_mesh_model_into_a_cloud_model_of_the_sam
     result = CliRunner().invoke(main, ["export", str(tmp_path / "paper.safetensors"), str(tmp_path / "x.safetensors"),
                                        "--points", "6"])
     assert result.exit_code == 2 and "paper.safetensors is not a landmark model" in result.output
+
