@@ -157,6 +157,9 @@ def test_query_a_cloud_with_an_outlier_against_the_exact_field(cloud_model, tmp_
     assert "mean relative error vs exact on sphere.obj" in result.output
     field = np.load(tmp_path / "field.npy")
     assert field.shape == (1501,) and np.isnan(field[1500]) and np.isfinite(field[:1500]).all() and field[3] == 0
+    result = CliRunner().invoke(main, ["query", str(tmp_path / "cloud.safetensors"), str(tmp_path / "cloud.xyz"),
+                                       "--source", "3", "-o", str(tmp_path / "field.png")])
+    assert result.exit_code == 0 and (tmp_path / "field.png").stat().st_size > 10_000, result.output
 
     exact, offset = exact_at_points(sphere_mesh(sphere), p, 3)
     great_circle = np.arccos(np.clip(p @ p[3], -1, 1))
