@@ -1,7 +1,7 @@
 """Geodesic distances on point clouds made from the validation meshes, against exact mesh geodesics.
 
     python benchmarks/bench_points.py data/val.zarr --model runs/pc8/best.safetensors [--meshes 19]
-        [--kinds clean noisy density 2k] [--pairs 20000] [--csv out.csv]
+        [--kinds clean noisy density 2k] [--pairs 20000] [--neurogf REPO] [--csv out.csv]
 
 Each validation mesh's vertices become clouds (no faces): ``clean`` (all of them), ``noisy`` (Gaussian
 noise of 0.5% of the longest bounding-box side on every coordinate), ``density`` (a random direction
@@ -10,7 +10,8 @@ mesh), ``2k`` (2,000 of them, uniformly). The truth is the stored exact distance
 vertices (sources x all vertices; ``--pairs`` of them per mesh, among the points a cloud kept), so noise
 moves the points, not the answer. Compared: the point-cloud model (``--model``), potpourri3d's point-cloud
 heat method (``PointCloudHeatSolver``, one field per source), and the shipped mesh model on the mesh itself
-(the same for every kind). MRE is the training metric, |d - exact| / (exact + 1e-3), averaged over pairs,
+(the same for every kind), and with ``--neurogf REPO`` NeuroGF's generalizable model from a checkout of its
+repository (benchmarks/neurogf.py). MRE is the training metric, |d - exact| / (exact + 1e-3), averaged over pairs,
 then over meshes. One torch thread; embed = the whole precomputation of a cloud (graph, normals, landmark
 fields, network).
 """
@@ -77,11 +78,16 @@ def main():
     ap.add_argument("--kinds", nargs="+", default=list(KINDS[:4]), choices=KINDS)
     ap.add_argument("--pairs", type=int, default=20000)
     ap.add_argument("--no-heat", action="store_true", help="skip the heat method (slow: a field per source)")
+    ap.add_argument("--neurogf", metavar="REPO", help="a checkout of github.com/keeganhk/NeuroGF: its generalizable "
+                                                     "model as one more column")
     ap.add_argument("--csv")
     args = ap.parse_args()
     torch.set_num_threads(1)
     store = GeodesicStore(args.store)
     cloud_model, mesh_model = GeGnn.from_checkpoint(args.model), GeGnn.pretrained()
+    if args.neurogf:
+        from neurogf import NeuroGF
+        neurogf = NeuroGF(args.neurogf)
     rows = []
     for mesh_id in store.mesh_ids[:args.meshes]:
         g = store.geometry(mesh_id)
@@ -112,15 +118,18 @@ def main():
                        model=mre(emb.distance(local[:, 0], local[:, 1]), truth), mesh_model=mre(reference, truth))
             if not args.no_heat:
                 row["heat"] = mre(heat_method(points, local), truth)
+            if args.neurogf:
+                row["neurogf"] = mre(neurogf.distances(points, local), truth)
             rows.append(row)
             print(" ".join(f"{k}={v:.4f}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items()), flush=True)
     print(f"\n{cpu_description()}, one torch thread\n\n| cloud | points | ours | heat method (potpourri3d) "
-          "| mesh model on the mesh | embed s |\n|---|---:|---:|---:|---:|---:|")
+          "| NeuroGF | mesh model on the mesh | embed s |\n|---|---:|---:|---:|---:|---:|---:|")
     for kind in args.kinds:
         r = [x for x in rows if x["kind"] == kind]
-        heat = f"{100 * np.mean([x['heat'] for x in r]):.2f}%" if "heat" in r[0] else "-"
-        print(f"| {kind} | {np.mean([x['points'] for x in r]):.0f} | {100 * np.mean([x['model'] for x in r]):.2f}% | "
-              f"{heat} | {100 * np.mean([x['mesh_model'] for x in r]):.2f}% | {np.mean([x['embed_s'] for x in r]):.2f} |")
+        mean = {k: f"{100 * np.mean([x[k] for x in r]):.2f}%" if k in r[0] else "-"
+                for k in ("model", "heat", "neurogf", "mesh_model")}
+        print(f"| {kind} | {np.mean([x['points'] for x in r]):.0f} | {mean['model']} | {mean['heat']} | "
+              f"{mean['neurogf']} | {mean['mesh_model']} | {np.mean([x['embed_s'] for x in r]):.2f} |")
     if args.csv:
         with open(args.csv, "w", newline="") as f:
             w = csv.DictWriter(f, fieldnames=list(rows[0]))
