@@ -112,12 +112,15 @@ def main():
               help="Exact geodesic code, all equal to 1e-9: vtp (this package's solver, the fastest), "
                    "tvb-gdist or libigl (the reference). The store records it and refuses a run with another.")
 @click.option("--timeout", default=1800.0, show_default=True, help="Seconds one mesh may take before it counts as failed.")
+@click.option("--points", "n_points", type=click.IntRange(2), metavar="N",
+              help="Then add N surface points per mesh with exact distances between them, --pairs of them "
+                   "(the data of point-cloud models: as `geodata points OUT --points N`).")
 @click.option("--retry-failed", is_flag=True, help="Try again the meshes recorded under failed/.")
 @click.option("--strict", is_flag=True, help="Exit with status 1 when any mesh of this run failed (default: 0, "
                                              "a batch that recorded its failures did its job).")
 @_list_options
 @_scale_options
-def prepare(raw_dir, out, pairs, target_vertices, collapse, seed, geodesic_backend, timeout, retry_failed,
+def prepare(raw_dir, out, pairs, target_vertices, collapse, seed, geodesic_backend, timeout, n_points, retry_failed,
             strict, include, exclude, jobs, backend, scheduler, shard, log_file):
     """Prepare every mesh file under RAW_DIR (OBJ/OFF/PLY/STL/GLB, searched recursively) into store OUT.
 
@@ -143,6 +146,10 @@ def prepare(raw_dir, out, pairs, target_vertices, collapse, seed, geodesic_backe
              n_done, n_failed, "" if shard == (0, 1) else f" (shard {shard[0]}/{shard[1]})")
     rows = _run(partial(process_task, out=out, config=config), tasks, "prepare", jobs, backend, scheduler)
     _summary(rows, n_done, n_failed)
+    if n_points:
+        from geodata.points_runner import PointsConfig, process_points
+        rows += _add_subgroup(out, "points", process_points, PointsConfig(n_points, pairs, seed, timeout),
+                              retry_failed, jobs, backend, scheduler, shard, log_file)
     failed = sum(r["status"] != "ok" for r in rows)
     if strict and failed:
         raise click.ClickException(f"--strict: {failed} of {len(rows)} meshes failed (listed above and in "
@@ -217,8 +224,10 @@ def biharmonic(out, pairs, seed, timeout, retry_failed, jobs, backend, scheduler
                   backend, scheduler, shard, log_file)
 
 
-def _add_subgroup(out, subgroup, process, config, retry_failed, jobs, backend, scheduler, shard, log_file) -> None:
-    """Run ``process`` on this shard's committed meshes still without ``subgroup``, with a summary."""
+def _add_subgroup(out, subgroup, process, config, retry_failed, jobs, backend, scheduler, shard,
+                  log_file) -> list[dict]:
+    """Run ``process`` on this shard's committed meshes still without ``subgroup``, with a summary; the
+    rows of this run."""
     _setup_logging(log_file)
     try:
         store.open_store(out)
@@ -228,6 +237,7 @@ def _add_subgroup(out, subgroup, process, config, retry_failed, jobs, backend, s
     log.info("%s %s: %d to do, %d already done, %d failed before", subgroup, out, len(tasks), n_done, n_failed)
     rows = _run(partial(process, out=out, config=config), tasks, subgroup, jobs, backend, scheduler)
     _summary(rows, n_done, n_failed)
+    return rows
 
 
 @main.command()

@@ -81,3 +81,23 @@ def test_geodata_points_adds_a_committed_subgroup_and_resumes(reference, tmp_pat
         assert len(np.unique(p["pairs"][:, 0])) == 4 and np.isfinite(p["distances"][:]).all()
     again = CliRunner().invoke(main, ["points", str(out), "--points", "200", "--pairs", "800"])
     assert "0 to do, 3 already done" in again.output
+
+
+
+def test_prepare_with_points_writes_what_geodata_points_adds_afterwards(raw, reference, tmp_path):
+    from storetools import prepare
+
+    out = tmp_path / "with_points.zarr"
+    result = prepare(raw, out, "--points", "200")  # its --pairs (3000) for the points' pairs too
+    assert "points" in result.output and "3 to do" in result.output
+    after = tmp_path / "after.zarr"
+    shutil.copytree(reference[0], after)
+    assert CliRunner().invoke(main, ["points", str(after), "--points", "200", "--pairs", "3000"]).exit_code == 0
+    ours, theirs = zarr.open_group(str(out), mode="r"), zarr.open_group(str(after), mode="r")
+    ids = sorted(k for k, g in ours["meshes"].groups() if g.attrs.get("status") == "ok")
+    assert len(ids) == 3 and ids == sorted(k for k, g in theirs["meshes"].groups() if g.attrs.get("status") == "ok")
+    for mesh_id in ids:
+        a, b = ours[f"meshes/{mesh_id}/points"], theirs[f"meshes/{mesh_id}/points"]
+        assert a.attrs["status"] == b.attrs["status"] == "ok"
+        for name in ("xyz", "normals", "face", "bary", "pairs", "distances"):
+            np.testing.assert_array_equal(a[name][:], b[name][:], err_msg=f"{mesh_id}/{name}")
