@@ -126,10 +126,10 @@ def _blocks(ctx, param, value):
                    "decoder on an --init network; ~10 ms a step on CPU against ~3 s for a network step).")
 @click.option("--landmark-output", type=click.Choice(["ratio", "interval"]), default="ratio", show_default=True,
               help="d = L exp(MLP), or (ablation) d = L + (U - L) sigmoid(MLP); L, U: the landmark bounds.")
-@click.option("--points", default=0, show_default=True, metavar="K",
+@click.option("--points", type=click.IntRange(0), default=0, is_flag=False, flag_value=8, metavar="[K]",
               help="Point-cloud model: each mesh's vertices are read as a cloud (faces unused): graph of the K "
-                   "nearest neighbours, estimated normals, point-cloud heat-method landmark fields (0: meshes). "
-                   "With --init, a mesh model's weights start it.")
+                   "nearest neighbours (--points alone: 8), estimated normals, point-cloud heat-method landmark "
+                   "fields (default 0: meshes). With --init, a mesh model's weights start it.")
 def train(store, run_dir, epochs, batch_size, lr, weight_decay, warmup_epochs, clip_grad, distance,
           pairs_per_mesh, val_fraction, val_store, no_rotate, seed, device, workers, resume, deterministic,
           field_cache, init_ckpt, channels, blocks, aggr, no_edge_length, no_relative_position, plain_grid_pool,

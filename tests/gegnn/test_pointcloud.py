@@ -133,6 +133,8 @@ def test_train_a_cloud_model_on_a_stores_vertices(tiny_store, tmp_path):
     assert (run / "fields.zarr" / "k8-cloud6").exists()  # the cloud's fields, apart from a mesh model's
     with open(run / "metrics.csv") as f:
         assert float(next(csv.DictReader(f))["val_mre"]) < 1.0
+    from gegnn.cli import train  # --points alone (DESIGN's command line) is the shipped model's 8 neighbours
+    assert train.make_context("train", [tiny_store, "--points", "--run", str(run)]).params["points"] == 8
 
 
 def test_query_a_cloud_with_an_outlier_against_the_exact_field(cloud_model, tmp_path):
