@@ -691,13 +691,20 @@ def _output_suffix(output, allowed) -> str:
 
 
 def _load_mesh(path, prepare):
+    """The query mesh of a mesh model's command; a point cloud is refused with the command that takes it."""
     from geodata.mesh import MeshError
+    from geodata.stages.cloud import CLOUD_SUFFIXES
 
     from .query import load_query_mesh
+
+    hint = f"point clouds are answered by a point-cloud model: gegnn query --pretrained points {Path(path).name} --source I"
+    if Path(path).suffix.lower() in set(CLOUD_SUFFIXES) - {".ply"}:
+        raise click.ClickException(f"{path}: a point-cloud file, not a mesh ({hint})")
     try:
         return load_query_mesh(path, prepare=prepare)
     except (MeshError, ValueError) as exc:
-        raise click.ClickException(f"{path}: {exc}") from None
+        cloud = isinstance(exc, MeshError) and exc.reason.startswith("point cloud")
+        raise click.ClickException(f"{path}: {exc}" + (f" ({hint})" if cloud else "")) from None
 
 
 def _paths(emb, qm, src, dst, path_to, exact_d, name) -> list:

@@ -221,3 +221,17 @@ def test_export_points_turns_a_landmark_mesh_model_into_a_cloud_model_of_the_sam
                                        "--points", "6"])
     assert result.exit_code == 2 and "paper.safetensors is not a landmark model" in result.output
 
+
+
+def test_a_mesh_model_given_a_cloud_names_the_model_that_takes_it(tmp_path):
+    import trimesh
+    from click.testing import CliRunner
+
+    from gegnn.cli import main
+
+    p = fibonacci_sphere(200)
+    np.savetxt(tmp_path / "scan.xyz", p)
+    trimesh.PointCloud(p).export(tmp_path / "scan.ply")
+    for name in ("scan.xyz", "scan.ply"):
+        result = CliRunner().invoke(main, ["query", "--pretrained", str(tmp_path / name), "--source", "0"])
+        assert result.exit_code == 1 and f"gegnn query --pretrained points {name} --source I" in result.output
