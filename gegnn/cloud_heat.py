@@ -825,20 +825,22 @@ class CloudHeatDistance(HeatSolver):
     Args:
         points: (N, 3) float, finite, N > 30.
         t_coef: time step over the mean squared cover edge length (potpourri3d's default 1).
+        neighbors: (N, k) int, each point's neighbours nearest first, instead of potpourri3d's 30 nearest
+            (then the fields are no longer the library's: :func:`gegnn.pointcloud.surface_neighbors`).
 
     Attributes:
         n: point count; t: the time step; n_faces: soup triangles; n_flips: intrinsic flips made;
         normals: (N, 3) the library's unit normals (unoriented: signs as its SVD leaves them).
     """
 
-    def __init__(self, points, t_coef: float = 1.0):
+    def __init__(self, points, t_coef: float = 1.0, neighbors: np.ndarray | None = None):
         p = np.ascontiguousarray(points, dtype=np.float64)
         if p.ndim != 2 or p.shape[1] != 3 or len(p) <= K_NEIGHBORS:
             raise ValueError(f"cloud heat method: need (N, 3) points with N > {K_NEIGHBORS}")
         if not np.isfinite(p).all():
             raise ValueError("cloud heat method: non-finite coordinates")
         self.n = len(p)
-        neighbors = _nearest(p)
+        neighbors = _nearest(p) if neighbors is None else np.asarray(neighbors, dtype=np.int64)
         offsets = p[neighbors] - p[:, None, :]
         self.normals = _normals(offsets)
         faces = _local_triangles(_tangent_coordinates(offsets, self.normals), neighbors)

@@ -15,7 +15,9 @@ r"""Point clouds as GeGnn inputs: the graph, the normals and the landmark fields
 * **Landmark fields**: geodesic farthest-point landmarks on every part of the graph and their distance
   fields by the point-cloud heat method (potpourri3d's ``PointCloudHeatSolver``: the heat method on the
   tufted Laplacian of the points' local Delaunay triangulations, Sharp and Crane 2020; computed by
-  :mod:`gegnn.cloud_heat`), as :mod:`gegnn.landmarks` does on meshes.
+  :mod:`gegnn.cloud_heat`), as :mod:`gegnn.landmarks` does on meshes; each point's local triangulation
+  from neighbours near its tangent plane (:func:`surface_neighbors`), not across a gap to a nearby part
+  (heat-method MRE on the validation clouds 4.22% -> 3.93%).
 
 Exact duplicates are merged before any of it and share their point's values.
 """
@@ -29,12 +31,14 @@ from geodata.mesh import label_groups
 
 from .landmarks import LandmarkFields, farthest_point_fields
 
-__all__ = ["CloudGraph", "cloud_graph", "mls_project", "knn_edges", "graph_parts", "pca_normals", "orient_normals",
+__all__ = ["CloudGraph", "cloud_graph", "mls_project", "surface_neighbors", "knn_edges", "graph_parts", "pca_normals", "orient_normals",
            "cloud_landmark_fields", "KNN", "CLOUD_T_COEF"]
 
 KNN = 8             # neighbours a point's graph edges and normal come from
 CLOUD_T_COEF = 1.0  # potpourri3d's default time step for point clouds
 MLS_K = 30          # neighbours of each point's quadric fit
+HEAT_K = 15         # neighbours of each point's local triangulation in the heat method
+CONE_DEG = 30.0     # ... within this angle of its tangent plane
 MIN_PART = 31       # parts of fewer points get no fields (distance 0): potpourri3d's point-cloud solver
                     # needs more points than its 30 neighbours
 
@@ -175,15 +179,40 @@ def cloud_landmark_fields(points: np.ndarray, part: np.ndarray, k: int, seed: in
     return LandmarkFields(out, landmarks, part)
 
 
+def surface_neighbors(points: np.ndarray, k: int = HEAT_K, cone_deg: float = CONE_DEG) -> np.ndarray:
+    r"""(N, k): each point's k nearest neighbours :math:`q` within ``cone_deg`` of its tangent plane,
+    :math:`|n \cdot (q - p)| < \sin(\text{cone})\,|q - p|` (n: the PCA normal of its 10 nearest), among
+    its 6k nearest; rows with fewer are filled with the nearest of the others. A point across a narrow gap
+    (between two legs, two fingers) lies off the tangent plane and is left out, where the plain k nearest
+    would join the two sides in the local triangulation. Needs more than 6k points (fewer: all)."""
+    from scipy.spatial import cKDTree
+
+    candidates = min(6 * k, len(points) - 1)
+    _, nbrs = cKDTree(points).query(points, candidates + 1)
+    nbrs = nbrs[:, 1:]
+    near = points[nbrs[:, :10]]
+    spread = near - near.mean(axis=1, keepdims=True)
+    normal = np.linalg.eigh(spread.transpose(0, 2, 1) @ spread)[1][:, :, 0]
+    offset = points[nbrs] - points[:, None]
+    off_plane = np.abs((offset @ normal[:, :, None])[..., 0]) >= np.sin(np.radians(cone_deg)) * np.linalg.norm(
+        offset, axis=2)
+    return np.take_along_axis(nbrs, np.argsort(off_plane, axis=1, kind="stable"), 1)[:, :k]
+
+
 def _cloud_field(points: np.ndarray, t_coef: float):
-    """``field(source) -> (N,)`` by the point-cloud heat method: :class:`gegnn.cloud_heat.CloudHeatDistance`
-    (potpourri3d's fields to 1e-13, 3x faster: 0.30 s for 128 landmark fields at 5k points against
-    0.92 s), potpourri3d itself on clouds that it refuses (a degenerate neighbourhood)."""
+    """``field(source) -> (N,)`` of one part by the point-cloud heat method on :func:`surface_neighbors`
+    (on potpourri3d's 30 nearest where those would split the part; :class:`gegnn.cloud_heat.CloudHeatDistance`:
+    0.30 s for 128 landmark fields at 5k points, potpourri3d 0.92 s), potpourri3d itself on clouds that it
+    refuses (a degenerate neighbourhood)."""
     from .cloud_heat import CloudHeatDistance
 
     points = np.ascontiguousarray(points, dtype=np.float64)
+    neighbors = surface_neighbors(points)
+    pairs = np.stack([np.repeat(np.arange(len(points)), neighbors.shape[1]), neighbors.ravel()], axis=1)
+    if graph_parts(len(points), pairs).max() > 0:  # the cone split the part: the plain nearest keep it whole
+        neighbors = None
     try:
-        return CloudHeatDistance(points, t_coef).distance
+        return CloudHeatDistance(points, t_coef, neighbors).distance
     except ValueError:
         import potpourri3d as pp3d
         return pp3d.PointCloudHeatSolver(points, t_coef=t_coef).compute_distance

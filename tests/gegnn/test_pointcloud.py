@@ -8,7 +8,7 @@ import pytest
 from gegnn_stores import small_config
 
 from gegnn import GeGnn
-from gegnn.pointcloud import cloud_graph, cloud_landmark_fields, knn_edges, mls_project
+from gegnn.pointcloud import cloud_graph, cloud_landmark_fields, knn_edges, mls_project, surface_neighbors
 
 
 def fibonacci_sphere(n: int, center=(0.0, 0.0, 0.0), radius: float = 1.0) -> np.ndarray:
@@ -44,6 +44,21 @@ def test_mls_projection_keeps_quadrics_and_takes_noise_out():
     assert after < 0.5 * before
     line = np.c_[np.linspace(0, 1, 40), np.zeros((40, 2))]  # no surface to fit: the points stay
     np.testing.assert_array_equal(mls_project(line), line)
+
+
+def test_surface_neighbours_do_not_cross_a_gap_and_are_the_nearest_where_there_is_none():
+    h = 0.05
+    x, y = np.meshgrid(np.arange(40) * h, np.arange(40) * h)
+    sheet = np.stack([x.ravel(), y.ravel(), np.zeros(x.size)], axis=1)
+    p = np.concatenate([sheet, sheet + (0.3 * h, 0.4 * h, 1.2 * h)])  # two sheets 1.2 spacings apart
+    inner = np.flatnonzero((np.abs(p[:, :2] - 1.0) < 0.7).all(axis=1))  # away from the sheets' edges
+    plain = np.argsort(np.linalg.norm(p[:, None] - p[None], axis=2), axis=1)[:, 1:16]
+    other_sheet = (plain[inner] >= 1600) != (inner[:, None] >= 1600)
+    assert other_sheet.any(axis=1).all()  # the plain 15 nearest of every inner point reach across
+    ours = surface_neighbors(p, 15)
+    assert not ((ours[inner] >= 1600) != (inner[:, None] >= 1600)).any()
+    sphere = fibonacci_sphere(1000)
+    np.testing.assert_array_equal(np.sort(surface_neighbors(sphere, 15), axis=1), np.sort(knn_edges(sphere, 15)[1], axis=1))
 
 
 def test_normals_are_radial_and_outward_on_each_of_two_spheres():
