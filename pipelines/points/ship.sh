@@ -1,0 +1,20 @@
+#!/usr/bin/env bash
+# The shipped point-cloud GeGnn (gegnn/weights/gegnn-points-v1.safetensors; docs/model-card.md) and its
+# side-by-side table (docs/pointclouds.md), after pipelines/pretrained/data.sh:
+#     bash pipelines/points/ship.sh data/ runs/ [NEUROGF_REPO]
+# NEUROGF_REPO: a checkout of github.com/keeganhk/NeuroGF for its column (left out without it).
+set -euo pipefail
+data=${1:?usage: ship.sh DATA_DIR RUNS_DIR [NEUROGF_REPO]}
+runs=${2:?usage: ship.sh DATA_DIR RUNS_DIR [NEUROGF_REPO]}
+neurogf=${3:-}
+mkdir -p "$runs"
+
+# The landmark model's weights as they are, read as a point-cloud model (8 neighbours).
+gegnn export gegnn/weights/gegnn-landmark-v1.safetensors gegnn/weights/gegnn-points-v1.safetensors --points 8
+
+# 8,000 area-uniform surface points per validation mesh with exact distances between them (the 8k row).
+geodata points "$data/val.zarr" --points 8000 --pairs 160000
+
+OMP_NUM_THREADS=1 python benchmarks/bench_points.py "$data/val.zarr" --model gegnn/weights/gegnn-points-v1.safetensors \
+    --kinds clean noisy density 2k 8k ${neurogf:+--neurogf "$neurogf"} --csv "$runs/bench-points-v1.csv"
+OMP_NUM_THREADS=1 gegnn eval gegnn/weights/gegnn-points-v1.safetensors "$data/val.zarr"
