@@ -1,12 +1,13 @@
 """Geodesic distances on point clouds made from the validation meshes, against exact mesh geodesics.
 
-    python benchmarks/bench_points.py data/val.zarr --model runs/pc8/best.safetensors [--meshes 19]
-        [--kinds clean noisy density 2k] [--pairs 20000] [--neurogf REPO] [--csv out.csv]
+    python benchmarks/bench_points.py data/val.zarr --model gegnn/weights/gegnn-points-v1.safetensors [--meshes 19]
+        [--kinds clean noisy density 2k surface] [--pairs 20000] [--neurogf REPO] [--csv out.csv]
 
 Each validation mesh's vertices become clouds (no faces): ``clean`` (all of them), ``noisy`` (Gaussian
 noise of 0.5% of the longest bounding-box side on every coordinate), ``density`` (a random direction
 along which the density falls tenfold, points kept with probability 10^-t, t from 0 to 1 across the
-mesh), ``2k`` (2,000 of them, uniformly). The truth is the stored exact distance between the original
+mesh), ``2k`` (2,000 of them, uniformly); ``surface``: the store's ``geodata points`` surface samples
+(any count) with their own exact pairs, the mesh model answering at the same surface points. The truth is the stored exact distance between the original
 vertices (sources x all vertices; ``--pairs`` of them per mesh, among the points a cloud kept), so noise
 moves the points, not the answer. Compared: the point-cloud model (``--model``), potpourri3d's point-cloud
 heat method (``PointCloudHeatSolver``, one field per source), and the shipped mesh model on the mesh itself
@@ -28,7 +29,7 @@ from bench_results import cpu_description  # benchmarks/ is on sys.path when a s
 from gegnn import GeGnn
 from gegnn.data import GeodesicStore
 
-KINDS = ("clean", "noisy", "density", "2k", "8k")
+KINDS = ("clean", "noisy", "density", "2k", "surface")
 NOISE = 0.005       # of the longest bounding-box side
 DENSITY_RATIO = 10.0
 
@@ -96,7 +97,7 @@ def main():
         mesh_pred = mesh_emb.distance(pairs[:, 0], pairs[:, 1])
         for kind in args.kinds:
             pick = np.random.default_rng(0)
-            if kind == "8k":  # `geodata points` samples: their own exact pairs
+            if kind == "surface":  # `geodata points` samples (8k, 32k, ...): their own exact pairs
                 sub = store.root[f"meshes/{mesh_id}/points"]
                 points = np.asarray(sub["xyz"][:], dtype=np.float64)
                 ok = pick.permutation(sub["pairs"].shape[0])[:args.pairs]

@@ -12,9 +12,9 @@ mkdir -p "$runs"
 # The landmark model's weights as they are, read as a point-cloud model (8 neighbours).
 gegnn export gegnn/weights/gegnn-landmark-v1.safetensors gegnn/weights/gegnn-points-v1.safetensors --points 8
 
-# 8,000 area-uniform surface points per validation mesh with exact distances between them (the 8k row).
+# 8,000 area-uniform surface points per validation mesh with exact distances between them (the `surface` kind: the 8k rows).
 geodata points "$data/val.zarr" --points 8000 --pairs 160000
 
 OMP_NUM_THREADS=1 python benchmarks/bench_points.py "$data/val.zarr" --model gegnn/weights/gegnn-points-v1.safetensors \
-    --kinds clean noisy density 2k 8k ${neurogf:+--neurogf "$neurogf"} --csv "$runs/bench-points-v1.csv"
+    --kinds clean noisy density 2k surface ${neurogf:+--neurogf "$neurogf"} --csv "$runs/bench-points-v1.csv"
 OMP_NUM_THREADS=1 gegnn eval gegnn/weights/gegnn-points-v1.safetensors "$data/val.zarr"
