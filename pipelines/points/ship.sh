@@ -12,9 +12,14 @@ mkdir -p "$runs"
 # The landmark model's weights as they are, read as a point-cloud model (8 neighbours).
 gegnn export gegnn/weights/gegnn-landmark-v1.safetensors gegnn/weights/gegnn-points-v1.safetensors --points 8
 
-# 8,000 area-uniform surface points per validation mesh with exact distances between them (the `surface` kind: the 8k rows).
+# Area-uniform surface points per validation mesh with exact distances between them (the `surface` kind):
+# 8,000 in the store itself, 32,000 in a copy made before (a store holds one points/ subgroup a mesh).
+[ -d "$data/val-32k.zarr" ] || { cp -r "$data/val.zarr" "$data/val-32k.zarr" && rm -rf "$data"/val-32k.zarr/meshes/*/points; }
 geodata points "$data/val.zarr" --points 8000 --pairs 160000
+geodata points "$data/val-32k.zarr" --points 32000 --pairs 160000
 
 OMP_NUM_THREADS=1 python benchmarks/bench_points.py "$data/val.zarr" --model gegnn/weights/gegnn-points-v1.safetensors \
     --kinds clean noisy density 2k surface ${neurogf:+--neurogf "$neurogf"} --csv "$runs/bench-points-v1.csv"
+OMP_NUM_THREADS=1 python benchmarks/bench_points.py "$data/val-32k.zarr" --model gegnn/weights/gegnn-points-v1.safetensors \
+    --kinds surface ${neurogf:+--neurogf "$neurogf"} --csv "$runs/bench-points-32k.csv"
 OMP_NUM_THREADS=1 gegnn eval gegnn/weights/gegnn-points-v1.safetensors "$data/val.zarr"
