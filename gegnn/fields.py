@@ -70,7 +70,8 @@ class FieldSpec:
     def name(self) -> str:
         if self.kind == "spectral":
             return f"spectral{self.size}"
-        return f"k{self.size}" + (f"-cloud{self.cloud}" if self.cloud else "")
+        # "-surface": point-cloud fields on surface_neighbors (since 2026-11-23): not those of older caches
+        return f"k{self.size}" + (f"-cloud{self.cloud}-surface" if self.cloud else "")
 
     def compute(self, vertices: np.ndarray, faces: np.ndarray, seed: int = 0) -> np.ndarray:
         """The fields of one mesh, float32 (N, K) or (N, m + 1); for a point-cloud model, of its vertices as
