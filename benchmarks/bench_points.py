@@ -7,7 +7,9 @@ Each validation mesh's vertices become clouds (no faces): ``clean`` (all of them
 noise of 0.5% of the longest bounding-box side on every coordinate), ``density`` (a random direction
 along which the density falls tenfold, points kept with probability 10^-t, t from 0 to 1 across the
 mesh), ``2k`` (2,000 of them, uniformly); ``surface``: the store's ``geodata points`` surface samples
-(any count) with their own exact pairs, the mesh model answering at the same surface points. The truth is the stored exact distance between the original
+(any count) with their own exact pairs, the mesh model answering at the same surface points; ``normals``:
+the clean cloud with the mesh's vertex normals given to the model, as a scan's (the heat method and
+NeuroGF take none). The truth is the stored exact distance between the original
 vertices (sources x all vertices; ``--pairs`` of them per mesh, among the points a cloud kept), so noise
 moves the points, not the answer. Compared: the point-cloud model (``--model``), potpourri3d's point-cloud
 heat method (``PointCloudHeatSolver``, one field per source), and the shipped mesh model on the mesh itself
@@ -29,7 +31,7 @@ from bench_results import cpu_description  # benchmarks/ is on sys.path when a s
 from gegnn import GeGnn
 from gegnn.data import GeodesicStore
 
-KINDS = ("clean", "noisy", "density", "2k", "surface")
+KINDS = ("clean", "noisy", "density", "2k", "surface", "normals")
 NOISE = 0.005       # of the longest bounding-box side
 DENSITY_RATIO = 10.0
 
@@ -37,7 +39,7 @@ DENSITY_RATIO = 10.0
 def make_cloud(vertices: np.ndarray, kind: str, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """The cloud's points and which vertex each one is."""
     n = len(vertices)
-    if kind == "clean":
+    if kind in ("clean", "normals"):
         keep = np.arange(n)
     elif kind == "noisy":
         keep = np.arange(n)
@@ -113,7 +115,7 @@ def main():
                 ok = ok[pick.permutation(len(ok))[:args.pairs]]
                 local, truth, reference = index[pairs[ok]], exact[ok], mesh_pred[ok]
             t = time.perf_counter()
-            emb = cloud_model.embed(points)
+            emb = cloud_model.embed(points, normals=g.normals[keep] if kind == "normals" else None)
             embed_s = time.perf_counter() - t
             row = dict(mesh_id=mesh_id, kind=kind, points=len(points), pairs=len(local), embed_s=round(embed_s, 3),
                        model=mre(emb.distance(local[:, 0], local[:, 1]), truth), mesh_model=mre(reference, truth))

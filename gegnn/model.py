@@ -267,7 +267,7 @@ class GeGnn(nn.Module):
         graph = self.mesh_graph(g.points, g.normals.astype(np.float32), g.edges)
         spec = FieldSpec.of(self.config)
         fields = None if spec is None else torch.as_tensor(
-            cloud_landmark_fields(g.points, g.part, spec.size).distances, device=device)
+            cloud_landmark_fields(g.points, g.part, spec.size, normals=normals).distances, device=device)
         return self.hierarchy(graph).to(device), fields, scale, expand.reshape(-1)
 
     def finetune(self, vertices: np.ndarray, faces: np.ndarray, **options):

@@ -157,11 +157,12 @@ def graph_parts(n: int, edges: np.ndarray) -> np.ndarray:
 
 
 def cloud_landmark_fields(points: np.ndarray, part: np.ndarray, k: int, seed: int = 0,
-                          t_coef: float = CLOUD_T_COEF) -> LandmarkFields:
+                          t_coef: float = CLOUD_T_COEF, normals: np.ndarray | None = None) -> LandmarkFields:
     """K farthest-point landmarks per part of the graph and their point-cloud heat-method distance fields
     (float32 (N, K)), as :func:`gegnn.landmarks.landmark_fields` on a mesh: deterministic for a given
     cloud, ``k`` and ``seed``; parts of fewer than MIN_PART points get distance 0 (as a mesh's parts of
-    fewer than 3 vertices)."""
+    fewer than 3 vertices). ``normals``: the cloud's own oriented unit normals, if it has them (see
+    :func:`surface_neighbors`)."""
     n_parts = int(part.max()) + 1
     out = np.zeros((len(points), k), dtype=np.float32)
     landmarks = np.zeros((n_parts, k), dtype=np.int64)
@@ -171,7 +172,8 @@ def cloud_landmark_fields(points: np.ndarray, part: np.ndarray, k: int, seed: in
             landmarks[c] = idx[0]
             continue
         n_fields = min(k, len(idx))
-        chosen, fields = farthest_point_fields(_cloud_field(points[idx], t_coef), len(idx), n_fields,
+        field = _cloud_field(points[idx], t_coef, None if normals is None else normals[idx])
+        chosen, fields = farthest_point_fields(field, len(idx), n_fields,
                                                int(rng.integers(len(idx))))
         cols = np.arange(k) % len(chosen)
         out[idx] = fields[:, cols]
@@ -179,27 +181,35 @@ def cloud_landmark_fields(points: np.ndarray, part: np.ndarray, k: int, seed: in
     return LandmarkFields(out, landmarks, part)
 
 
-def surface_neighbors(points: np.ndarray, k: int = HEAT_K, cone_deg: float = CONE_DEG) -> np.ndarray:
+def surface_neighbors(points: np.ndarray, k: int = HEAT_K, cone_deg: float = CONE_DEG,
+                      normals: np.ndarray | None = None) -> np.ndarray:
     r"""(N, k): each point's k nearest neighbours :math:`q` within ``cone_deg`` of its tangent plane,
     :math:`|n \cdot (q - p)| < \sin(\text{cone})\,|q - p|` (n: the PCA normal of its 10 nearest), among
     its 6k nearest; rows with fewer are filled with the nearest of the others. A point across a narrow gap
     (between two legs, two fingers) lies off the tangent plane and is left out, where the plain k nearest
-    would join the two sides in the local triangulation. Needs more than 6k points (fewer: all)."""
+    would join the two sides in the local triangulation. With the cloud's own oriented ``normals`` (a
+    scan's), n is the point's and a neighbour must also face the same side, :math:`n_q \cdot n_p > 0`:
+    the two sides of a thin wall face away from each other. Needs more than 6k points (fewer: all)."""
     from scipy.spatial import cKDTree
 
     candidates = min(6 * k, len(points) - 1)
     _, nbrs = cKDTree(points).query(points, candidates + 1)
     nbrs = nbrs[:, 1:]
-    near = points[nbrs[:, :10]]
-    spread = near - near.mean(axis=1, keepdims=True)
-    normal = np.linalg.eigh(spread.transpose(0, 2, 1) @ spread)[1][:, :, 0]
+    if normals is None:
+        near = points[nbrs[:, :10]]
+        spread = near - near.mean(axis=1, keepdims=True)
+        normal = np.linalg.eigh(spread.transpose(0, 2, 1) @ spread)[1][:, :, 0]
+    else:
+        normal = normals
     offset = points[nbrs] - points[:, None]
     off_plane = np.abs((offset @ normal[:, :, None])[..., 0]) >= np.sin(np.radians(cone_deg)) * np.linalg.norm(
         offset, axis=2)
+    if normals is not None:
+        off_plane |= (normals[nbrs] @ normals[:, :, None])[..., 0] <= 0
     return np.take_along_axis(nbrs, np.argsort(off_plane, axis=1, kind="stable"), 1)[:, :k]
 
 
-def _cloud_field(points: np.ndarray, t_coef: float):
+def _cloud_field(points: np.ndarray, t_coef: float, normals: np.ndarray | None = None):
     """``field(source) -> (N,)`` of one part by the point-cloud heat method on :func:`surface_neighbors`
     (on potpourri3d's 30 nearest where those would split the part; :class:`gegnn.cloud_heat.CloudHeatDistance`:
     0.30 s for 128 landmark fields at 5k points, potpourri3d 0.92 s), potpourri3d itself on clouds that it
@@ -207,7 +217,7 @@ def _cloud_field(points: np.ndarray, t_coef: float):
     from .cloud_heat import CloudHeatDistance
 
     points = np.ascontiguousarray(points, dtype=np.float64)
-    neighbors = surface_neighbors(points)
+    neighbors = surface_neighbors(points, normals=normals)
     pairs = np.stack([np.repeat(np.arange(len(points)), neighbors.shape[1]), neighbors.ravel()], axis=1)
     if graph_parts(len(points), pairs).max() > 0:  # the cone split the part: the plain nearest keep it whole
         neighbors = None

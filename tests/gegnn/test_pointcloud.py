@@ -61,6 +61,18 @@ def test_surface_neighbours_do_not_cross_a_gap_and_are_the_nearest_where_there_i
     np.testing.assert_array_equal(np.sort(surface_neighbors(sphere, 15), axis=1), np.sort(knn_edges(sphere, 15)[1], axis=1))
 
 
+def test_a_scans_own_normals_keep_the_two_sides_of_a_thin_wall_apart():
+    h = 0.05
+    x, y = np.meshgrid(np.arange(40) * h, np.arange(40) * h)
+    sheet = np.stack([x.ravel(), y.ravel(), np.zeros(x.size)], axis=1)
+    p = np.concatenate([sheet, sheet + (0.5 * h, 0.5 * h, 0.5 * h)])  # a wall half a spacing thick
+    normals = np.repeat([[0, 0, -1.0], [0, 0, 1.0]], 1600, axis=0)   # its two sides face away
+    side = np.arange(3200) >= 1600
+    inner = np.flatnonzero((np.abs(p[:, :2] - 1.0) < 0.7).all(axis=1))
+    assert (side[surface_neighbors(p, 15)[inner]] != side[inner, None]).any(axis=1).all()  # the cone alone: no
+    assert not (side[surface_neighbors(p, 15, normals=normals)[inner]] != side[inner, None]).any()
+
+
 def test_normals_are_radial_and_outward_on_each_of_two_spheres():
     a, b = fibonacci_sphere(800), fibonacci_sphere(300, center=(5.0, 0, 0), radius=0.5)
     p = np.concatenate([a, b])
