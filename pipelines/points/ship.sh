@@ -19,7 +19,7 @@ geodata points "$data/val.zarr" --points 8000 --pairs 160000
 geodata points "$data/val-32k.zarr" --points 32000 --pairs 160000
 
 OMP_NUM_THREADS=1 python benchmarks/bench_points.py "$data/val.zarr" --model gegnn/weights/gegnn-points-v1.safetensors \
-    --kinds clean noisy density 2k surface ${neurogf:+--neurogf "$neurogf"} --csv "$runs/bench-points-v1.csv"
+    --kinds clean noisy density 2k surface normals ${neurogf:+--neurogf "$neurogf"} --csv "$runs/bench-points-v1.csv"
 OMP_NUM_THREADS=1 python benchmarks/bench_points.py "$data/val-32k.zarr" --model gegnn/weights/gegnn-points-v1.safetensors \
     --kinds surface ${neurogf:+--neurogf "$neurogf"} --csv "$runs/bench-points-32k.csv"
 OMP_NUM_THREADS=1 gegnn eval gegnn/weights/gegnn-points-v1.safetensors "$data/val.zarr"
