@@ -697,7 +697,8 @@ def _load_mesh(path, prepare):
 
     from .query import load_query_mesh
 
-    hint = f"point clouds are answered by a point-cloud model: gegnn query --pretrained points {Path(path).name} --source I"
+    hint = ("point clouds are answered by a point-cloud model: gegnn query --pretrained points "
+            f"{Path(path).name} --source I")
     if Path(path).suffix.lower() in set(CLOUD_SUFFIXES) - {".ply"}:
         raise click.ClickException(f"{path}: a point-cloud file, not a mesh ({hint})")
     try:

@@ -58,7 +58,8 @@ def test_surface_neighbours_do_not_cross_a_gap_and_are_the_nearest_where_there_i
     ours = surface_neighbors(p, 15)
     assert not ((ours[inner] >= 1600) != (inner[:, None] >= 1600)).any()
     sphere = fibonacci_sphere(1000)
-    np.testing.assert_array_equal(np.sort(surface_neighbors(sphere, 15), axis=1), np.sort(knn_edges(sphere, 15)[1], axis=1))
+    np.testing.assert_array_equal(np.sort(surface_neighbors(sphere, 15), axis=1),
+                                  np.sort(knn_edges(sphere, 15)[1], axis=1))
 
 
 def test_a_scans_own_normals_keep_the_two_sides_of_a_thin_wall_apart():
@@ -235,8 +236,8 @@ def test_export_points_turns_a_landmark_mesh_model_into_a_cloud_model_of_the_sam
     torch.manual_seed(1)
     mesh_model = GeGnn(small_config(landmarks=8))
     mesh_model.save(tmp_path / "mesh.safetensors")
-    result = CliRunner().invoke(main, ["export", str(tmp_path / "mesh.safetensors"), str(tmp_path / "cloud.safetensors"),
-                                       "--points", "6", "--dtype", "fp32"])
+    result = CliRunner().invoke(main, ["export", str(tmp_path / "mesh.safetensors"),
+                                       str(tmp_path / "cloud.safetensors"), "--points", "6", "--dtype", "fp32"])
     assert result.exit_code == 0 and "a point-cloud model (6 neighbours)" in result.output, result.output
     cloud = GeGnn.from_checkpoint(tmp_path / "cloud.safetensors")
     assert cloud.config.points == 6 and cloud.config.landmarks == 8
