@@ -544,7 +544,6 @@ def _query_cloud(model_spec, pretrained, cloud_path, source, output, suffix, exa
     from geodata.mesh import MeshError
     from geodata.stages.cloud import load_cloud_file, outliers
 
-    from .pointcloud import cloud_graph
     from .query import relative_errors
 
     name = Path(cloud_path).name
@@ -573,8 +572,7 @@ def _query_cloud(model_spec, pretrained, cloud_path, source, output, suffix, exa
         emb = model.embed(points[keep], normals=normals, precision=precision)
     except ValueError as exc:
         raise click.ClickException(f"{cloud_path}: {exc}") from None
-    distinct, inverse = np.unique(points[keep], axis=0, return_inverse=True)
-    part = cloud_graph(distinct, model.config.points).part[inverse.reshape(-1)]
+    part = emb.part
     local = int(np.searchsorted(keep, source))
     field = np.full(n, np.nan)
     field[keep] = np.where(part == part[local], emb.field(local), np.nan)

@@ -40,11 +40,15 @@ class Embedding:
             chunks, where the CPU's size would launch thousands of kernels.
         vertices, faces: the embedded mesh in its own units (:meth:`gegnn.GeGnn.embed` passes them):
             needed by the geometric queries, :meth:`path` and :meth:`log_map`.
+        part: for a point cloud, the part of every point (N,): the connected components of the neighbour
+            graph it was embedded on (distances between parts mean nothing); None for a mesh.
     """
 
     def __init__(self, features: Tensor, decoder, scale: float = 1.0, precision: str = "auto",
-                 chunk: int | None = None, vertices: np.ndarray | None = None, faces: np.ndarray | None = None):
+                 chunk: int | None = None, vertices: np.ndarray | None = None, faces: np.ndarray | None = None,
+                 part: np.ndarray | None = None):
         self.features = features.detach()
+        self.part = part
         self.vertices = None if vertices is None else np.asarray(vertices, dtype=np.float64)
         self.faces = None if faces is None else np.asarray(faces, dtype=np.int64)
         self._topology = None

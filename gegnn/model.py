@@ -196,7 +196,7 @@ class GeGnn(nn.Module):
         Vertices are normalized here (bounding box centered, longest half-extent 1, as in training);
         normals and edges are computed here (a cloud's normals may be given instead); distances from the
         result are in the input's units, between the input's vertices (a cloud's duplicate points share
-        their codes). ``device`` (default: where the model is) moves the model there, as
+        their codes; its ``part`` labels the parts of its neighbour graph). ``device`` (default: where the model is) moves the model there, as
         ``model.to(device)`` would, and the embedding lives there. ``precision="bf16"`` runs the network
         under bf16 autocast: ~2x faster on CPUs with AVX512-BF16, embeddings within ~1% (relative norm)
         of fp32.
@@ -214,12 +214,12 @@ class GeGnn(nn.Module):
         if self.config.points:
             if faces is not None:
                 raise ValueError("a point-cloud model takes points only (faces=None)")
-            h, fields, scale, expand = self.cloud_inputs(vertices, normals, device)
+            h, fields, scale, expand, part = self.cloud_inputs(vertices, normals, device)
         else:
             if faces is None:
                 raise ValueError("this model embeds meshes: give faces, or use a point-cloud model "
                                  "(trained with gegnn train --points)")
-            (h, fields, scale), expand = self.inputs(vertices, faces, device), None
+            (h, fields, scale), expand, part = self.inputs(vertices, faces, device), None, None
         was_training = self.training
         self.eval()
         autocast = torch.autocast(device.type, dtype=torch.bfloat16) if precision == "bf16" else nullcontext()
@@ -228,7 +228,7 @@ class GeGnn(nn.Module):
         self.train(was_training)
         if expand is not None:
             codes = codes[torch.as_tensor(expand, device=device)]
-        return Embedding(codes, self.distance, scale, vertices=vertices, faces=faces)
+        return Embedding(codes, self.distance, scale, vertices=vertices, faces=faces, part=part)
 
     def inputs(self, vertices: np.ndarray, faces: np.ndarray, device) -> tuple[Hierarchy, Tensor | None, float]:
         """What the network reads for one mesh in any units: the GeoPool hierarchy of the normalized mesh
@@ -246,7 +246,7 @@ class GeGnn(nn.Module):
     def cloud_inputs(self, points: np.ndarray, normals: np.ndarray | None, device):
         """What a point-cloud model reads for one cloud in any units (:mod:`gegnn.pointcloud`): the
         hierarchy of its distinct points, normalized, their landmark fields, the scale back to the input's
-        units, and the distinct point of every input point (N,)."""
+        units, the distinct point of every input point (N,) and the part of every input point (N,)."""
         from .pointcloud import cloud_graph, cloud_landmark_fields
 
         points = np.asarray(points, dtype=np.float64)
@@ -268,7 +268,8 @@ class GeGnn(nn.Module):
         spec = FieldSpec.of(self.config)
         fields = None if spec is None else torch.as_tensor(
             cloud_landmark_fields(g.points, g.part, spec.size, normals=normals).distances, device=device)
-        return self.hierarchy(graph).to(device), fields, scale, expand.reshape(-1)
+        expand = expand.reshape(-1)
+        return self.hierarchy(graph).to(device), fields, scale, expand, g.part[expand]
 
     def finetune(self, vertices: np.ndarray, faces: np.ndarray, **options):
         """Finetune in place on one mesh from exact distances of a few of its vertices; returns the

@@ -5,7 +5,7 @@ import csv
 
 import numpy as np
 import pytest
-from gegnn_stores import small_config
+from gegnn_stores import ellipsoid, small_config
 
 from gegnn import GeGnn
 from gegnn.pointcloud import cloud_graph, cloud_landmark_fields, knn_edges, mls_project, surface_neighbors
@@ -126,6 +126,14 @@ def test_a_cloud_model_embeds_points_and_duplicates_share_codes(cloud_model):
     np.testing.assert_array_equal(d, 0)
     far = emb.distance(np.zeros(600, dtype=int), np.arange(600))
     assert np.isfinite(far).all() and far.max() > 0
+
+
+def test_a_cloud_embedding_labels_the_parts_of_its_neighbour_graph(cloud_model):
+    a, b = fibonacci_sphere(400), fibonacci_sphere(300, center=(6.0, 0, 0))
+    emb = cloud_model.embed(np.concatenate([a, b, a[:3]]))  # three points twice
+    assert emb.part.shape == (703,) and len(np.unique(emb.part[:400])) == len(np.unique(emb.part[400:700])) == 1
+    assert emb.part[0] != emb.part[400] and (emb.part[700:] == emb.part[:3]).all()
+    assert GeGnn(small_config(landmarks=8)).embed(*ellipsoid()).part is None  # a mesh's parts: its faces
 
 
 def test_a_cloud_model_says_what_it_takes(cloud_model):
