@@ -90,7 +90,8 @@ def print_rows(rows):
 def summary(rows, label):
     med = {key: float(np.median([r[key] for r in rows])) for key in rows[0] if isinstance(rows[0][key], float)}
     print(f"\n{label} (medians): setup {med['setup'] * 1e3:.0f} ms vs potpourri3d {med['pp_setup'] * 1e3:.0f} ms "
-          f"+ {med['pp_first'] * 1e3:.0f} ms on its first field ({(med['pp_setup'] + med['pp_first']) / med['setup']:.2f}x); "
+          f"+ {med['pp_first'] * 1e3:.0f} ms on its first field "
+          f"({(med['pp_setup'] + med['pp_first']) / med['setup']:.2f}x); "
           f"a field {med['field'] * 1e3:.2f} ms one at a time, {med['batched'] * 1e3:.2f} ms in a 128-source solve, "
           f"potpourri3d {med['pp_field'] * 1e3:.2f} ms ({med['pp_field'] / med['field']:.1f}x, "
           f"{med['pp_field'] / med['batched']:.1f}x batched); max |diff| / max field "

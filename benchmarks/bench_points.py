@@ -1,7 +1,7 @@
 """Geodesic distances on point clouds made from the validation meshes, against exact mesh geodesics.
 
     python benchmarks/bench_points.py data/val.zarr --model gegnn/weights/gegnn-points-v1.safetensors [--meshes 19]
-        [--kinds clean noisy density 2k surface] [--pairs 20000] [--neurogf REPO] [--csv out.csv]
+        [--kinds clean noisy density 2k surface normals] [--pairs 20000] [--neurogf REPO] [--csv out.csv]
 
 Each validation mesh's vertices become clouds (no faces): ``clean`` (all of them), ``noisy`` (Gaussian
 noise of 0.5% of the longest bounding-box side on every coordinate), ``density`` (a random direction

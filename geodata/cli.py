@@ -70,6 +70,10 @@ def _scale_options(fn):
     return fn
 
 
+TIMEOUT_OPTION = click.option("--timeout", default=1800.0, show_default=True,
+                              help="Seconds one mesh may take before it counts as failed.")
+
+
 def _read_list(ctx, param, value):
     from geodata.prepare import read_list
 
@@ -111,7 +115,7 @@ def main():
 @click.option("--geodesic-backend", type=click.Choice(BACKENDS_GEODESIC), default="vtp", show_default=True,
               help="Exact geodesic code, all equal to 1e-9: vtp (this package's solver, the fastest), "
                    "tvb-gdist or libigl (the reference). The store records it and refuses a run with another.")
-@click.option("--timeout", default=1800.0, show_default=True, help="Seconds one mesh may take before it counts as failed.")
+@TIMEOUT_OPTION
 @click.option("--points", "n_points", type=click.IntRange(2), metavar="N",
               help="Then add N surface points per mesh with exact distances between them, --pairs of them "
                    "(the data of point-cloud models: as `geodata points OUT --points N`).")
@@ -208,7 +212,7 @@ def _summary(rows: list[dict], n_done: int, n_failed: int) -> None:
 @click.option("--pairs", default=600_000, show_default=True, type=click.IntRange(1),
               help="Biharmonic pairs per mesh (random sources x all other vertices of their component).")
 @click.option("--seed", default=0, show_default=True, help="Seed of the pair sampling (per mesh: seed + mesh id).")
-@click.option("--timeout", default=1800.0, show_default=True, help="Seconds one mesh may take before it counts as failed.")
+@TIMEOUT_OPTION
 @click.option("--retry-failed", is_flag=True, help="Try again the meshes whose biharmonic step failed.")
 @_scale_options
 def biharmonic(out, pairs, seed, timeout, retry_failed, jobs, backend, scheduler, shard, log_file):
@@ -247,7 +251,7 @@ def _add_subgroup(out, subgroup, process, config, retry_failed, jobs, backend, s
 @click.option("--pairs", default=600_000, show_default=True, type=click.IntRange(1),
               help="Exact pairs per mesh: random source points x every other point of their component.")
 @click.option("--seed", default=0, show_default=True, help="Seed of the points and sources (per mesh: seed + mesh id).")
-@click.option("--timeout", default=1800.0, show_default=True, help="Seconds one mesh may take before it counts as failed.")
+@TIMEOUT_OPTION
 @click.option("--retry-failed", is_flag=True, help="Try again the meshes whose points step failed.")
 @_scale_options
 def points(out, n_points, pairs, seed, timeout, retry_failed, jobs, backend, scheduler, shard, log_file):

@@ -137,4 +137,3 @@ def remove_mesh(out: str | Path, mesh_id: str) -> None:
     root = zarr.open_group(str(out), mode="r+")
     if f"meshes/{mesh_id}" in root:
         del root[f"meshes/{mesh_id}"]
-

@@ -2,8 +2,9 @@
 
 Formats: ``.xyz``/``.txt``/``.pts``/``.csv`` (one point a line: x y z, or x y z nx ny nz; with other counts
 x y z are the first three; separators spaces, tabs or commas; a header line and ``#`` comments
-allowed), ``.npy`` ((N, 3) or more columns, the same way), ``.ply`` (the vertex element's x, y, z and, where present, nx, ny, nz; faces are ignored). Every
-failure is a MeshError("load", reason) in the file's terms: which line, which value.
+allowed), ``.npy`` ((N, 3) or more columns, the same way), ``.ply`` (the vertex element's x, y, z and,
+where present, nx, ny, nz; faces are ignored). Every failure is a MeshError("load", reason) in the
+file's terms: which line, which value.
 
 Defined behaviour for what scans hold: exact duplicates are kept (the model merges them and gives them
 one code); points far from all others (``outliers``: their mean distance to their k nearest neighbours
