@@ -17,6 +17,14 @@ def ellipsoid(axes=(1.0, 0.7, 0.5), subdivisions=2) -> tuple[np.ndarray, np.ndar
     return np.asarray(m.vertices) * np.asarray(axes), np.asarray(m.faces)
 
 
+def fibonacci_sphere(n: int, center=(0.0, 0.0, 0.0), radius: float = 1.0) -> np.ndarray:
+    """n near-uniform points of a sphere (a Fibonacci lattice), as a point cloud (N, 3)."""
+    i = np.arange(n) + 0.5
+    z = 1 - 2 * i / n
+    r, phi = np.sqrt(1 - z * z), np.pi * (1 + 5 ** 0.5) * i
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1) * radius + np.asarray(center)
+
+
 def flat_grid(n=12) -> tuple[np.ndarray, np.ndarray]:
     """A triangulated square: geodesic distance equals Euclidean distance."""
     x, y = np.meshgrid(np.linspace(-1, 1, n), np.linspace(-1, 1, n), indexing="ij")

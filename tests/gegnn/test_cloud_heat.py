@@ -2,6 +2,7 @@
 triangles and distance fields (to solver rounding), great circles on a sphere, many sources per solve."""
 import numpy as np
 import pytest
+from gegnn_stores import fibonacci_sphere
 
 from geodata.examples import bumpy_sphere
 from gegnn.cloud_heat import CloudHeatDistance, _local_triangles, _nearest, _normals, _tangent_coordinates
@@ -9,13 +10,6 @@ from gegnn.cloud_heat import CloudHeatDistance, _local_triangles, _nearest, _nor
 pp3d = pytest.importorskip("potpourri3d")
 
 RTOL = 1e-9  # of the largest distance; measured <= 3e-10 here (cocircular grid), 6e-14 on validation clouds
-
-
-def fibonacci_sphere(n: int) -> np.ndarray:
-    i = np.arange(n) + 0.5
-    z = 1 - 2 * i / n
-    r, phi = np.sqrt(1 - z * z), np.pi * (1 + 5 ** 0.5) * i
-    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
 
 
 def random_sphere(n: int, seed: int = 1) -> np.ndarray:

@@ -5,17 +5,10 @@ import csv
 
 import numpy as np
 import pytest
-from gegnn_stores import ellipsoid, small_config
+from gegnn_stores import ellipsoid, fibonacci_sphere, small_config
 
 from gegnn import GeGnn
 from gegnn.pointcloud import cloud_graph, cloud_landmark_fields, knn_edges, mls_project, surface_neighbors
-
-
-def fibonacci_sphere(n: int, center=(0.0, 0.0, 0.0), radius: float = 1.0) -> np.ndarray:
-    i = np.arange(n) + 0.5
-    z = 1 - 2 * i / n
-    r, phi = np.sqrt(1 - z * z), np.pi * (1 + 5 ** 0.5) * i
-    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1) * radius + np.asarray(center)
 
 
 def test_knn_edges_are_each_pair_once_and_hold_every_points_neighbours():

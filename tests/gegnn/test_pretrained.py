@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 import torch
 import trimesh
+from gegnn_stores import fibonacci_sphere
 from safetensors import safe_open
 
 from gegnn import GeGnn
@@ -82,10 +83,7 @@ def test_the_shipped_point_cloud_model_gives_great_circles_on_a_sphere():
     """A 2,000-point sphere of radius 3, no normals given: 0.4-0.5% from the great-circle distances."""
     model = GeGnn.pretrained("points")
     assert model.config.points == 8
-    n = 2000
-    z = 1 - 2 * (np.arange(n) + 0.5) / n                      # a Fibonacci sphere: near-uniform points
-    phi = np.pi * (1 + 5 ** 0.5) * (np.arange(n) + 0.5)
-    p = np.stack([np.sqrt(1 - z * z) * np.cos(phi), np.sqrt(1 - z * z) * np.sin(phi), z], axis=1) * 3.0
+    p = fibonacci_sphere(2000, radius=3.0)
     emb = model.embed(p)
     for source in (0, 777):
         exact = 3.0 * np.arccos(np.clip(p @ p[source] / 9.0, -1, 1))
