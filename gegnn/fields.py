@@ -70,8 +70,9 @@ class FieldSpec:
     def name(self) -> str:
         if self.kind == "spectral":
             return f"spectral{self.size}"
-        # "-surface": point-cloud fields on surface_neighbors (since 2026-11-23): not those of older caches
-        return f"k{self.size}" + (f"-cloud{self.cloud}-surface" if self.cloud else "")
+        # "-surface2": point-cloud fields on surface_neighbors with twice-fitted cone normals (since
+        # 2026-11-23, the second cloud release): not those of older caches
+        return f"k{self.size}" + (f"-cloud{self.cloud}-surface2" if self.cloud else "")
 
     def compute(self, vertices: np.ndarray, faces: np.ndarray, seed: int = 0) -> np.ndarray:
         """The fields of one mesh, float32 (N, K) or (N, m + 1); for a point-cloud model, of its vertices as

@@ -36,10 +36,12 @@ __all__ = ["CloudGraph", "cloud_graph", "mls_project", "surface_neighbors", "knn
            "pca_normals", "orient_normals", "cloud_landmark_fields", "KNN", "CLOUD_T_COEF"]
 
 KNN = 8             # neighbours a point's graph edges and normal come from
-CLOUD_T_COEF = 1.0  # potpourri3d's default time step for point clouds
+CLOUD_T_COEF = 1.0  # potpourri3d's default time step for point clouds (the mesh fields' 0.5: worse on
+                    # irregular samples, 8k surface points 3.52% -> 3.75%; docs/pointclouds.md)
 MLS_K = 30          # neighbours of each point's quadric fit
 HEAT_K = 15         # neighbours of each point's local triangulation in the heat method
 CONE_DEG = 30.0     # ... within this angle of its tangent plane
+CONE_FIT = 5        # ... fitted to the point and this many neighbours
 MIN_PART = 31       # parts of fewer points get no fields (distance 0): potpourri3d's point-cloud solver
                     # needs more points than its 30 neighbours
 
@@ -105,7 +107,12 @@ def mls_project(points: np.ndarray, k: int = MLS_K) -> np.ndarray:
 
 def pca_normals(points: np.ndarray, nbrs: np.ndarray) -> np.ndarray:
     """Unit normals (N, 3), unoriented: the least-variance direction of each point with its neighbours."""
-    hood = np.concatenate([points[:, None], points[nbrs]], axis=1)
+    return _plane_normals(points, points[nbrs])
+
+
+def _plane_normals(centers: np.ndarray, near: np.ndarray) -> np.ndarray:
+    """Unit normals (N, 3), unoriented, of each center (N, 3) with its neighbours' positions (N, k, 3)."""
+    hood = np.concatenate([centers[:, None], near], axis=1)
     centered = hood - hood.mean(axis=1, keepdims=True)
     _, vecs = np.linalg.eigh(np.einsum("nki,nkj->nij", centered, centered))
     return vecs[:, :, 0]
@@ -185,29 +192,53 @@ def cloud_landmark_fields(points: np.ndarray, part: np.ndarray, k: int, seed: in
 def surface_neighbors(points: np.ndarray, k: int = HEAT_K, cone_deg: float = CONE_DEG,
                       normals: np.ndarray | None = None) -> np.ndarray:
     r"""(N, k): each point's k nearest neighbours :math:`q` within ``cone_deg`` of its tangent plane,
-    :math:`|n \cdot (q - p)| < \sin(\text{cone})\,|q - p|` (n: the PCA normal of its 10 nearest), among
-    its 6k nearest; rows with fewer are filled with the nearest of the others. A point across a narrow gap
-    (between two legs, two fingers) lies off the tangent plane and is left out, where the plain k nearest
-    would join the two sides in the local triangulation. With the cloud's own oriented ``normals`` (a
-    scan's), n is the point's and a neighbour must also face the same side, :math:`n_q \cdot n_p > 0`:
-    the two sides of a thin wall face away from each other. Needs more than 6k points (fewer: all)."""
+    :math:`|n \cdot (q - p)| < \sin(\text{cone})\,|q - p|`, among its 6k nearest; rows with fewer are filled
+    with the nearest of the others. A point across a narrow gap (between two legs, two fingers) lies off
+    the tangent plane and is left out, where the plain k nearest would join the two sides in the local
+    triangulation. n is fitted twice (:func:`pca_normals`): to the point and its CONE_FIT nearest, then to
+    the point and its CONE_FIT nearest within that first cone, so that near a gap the other side, which
+    tilts a plain fit, does not set the cone. With the cloud's own oriented ``normals`` (a scan's), n is
+    the point's and a neighbour must also face the same side, :math:`n_q \cdot n_p > 0`: the two sides of
+    a thin wall face away from each other. Needs more than 6k points (fewer: all)."""
     from scipy.spatial import cKDTree
 
-    candidates = min(6 * k, len(points) - 1)
-    _, nbrs = cKDTree(points).query(points, candidates + 1)
-    nbrs = nbrs[:, 1:]
+    tree = cKDTree(points)
+    out = np.empty((len(points), k), dtype=np.int64)
+    rows = np.arange(len(points))
+    for candidates in (2 * k, 6 * k):  # most rows are settled by their 2k nearest: the 6k only where not
+        candidates = min(candidates, len(points) - 1)
+        nbrs = tree.query(points[rows], candidates + 1)[1][:, 1:]
+        out[rows], settled = _cone_neighbors(points[rows], points[nbrs], nbrs, k, cone_deg,
+                                             None if normals is None else (normals[rows], normals[nbrs]))
+        rows = rows[~settled]
+        if not len(rows) or candidates == len(points) - 1:
+            break
+    return out
+
+
+def _cone_neighbors(centers, near, nbrs, k: int, cone_deg: float, normals) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`surface_neighbors` of the points ``centers`` among their candidates ``nbrs`` (nearest first,
+    at positions ``near``), and whether each row is settled: had k candidates within the cone (and
+    CONE_FIT for the second fit), so that more candidates would not change it. ``normals``: the points'
+    and their candidates' given normals, or None."""
+    offset = near - centers[:, None]
+    sin_dist = np.sin(np.radians(cone_deg)) * np.sqrt(np.einsum("nkd,nkd->nk", offset, offset))
+
+    def cone(normal):  # the candidates' order: within the cone first, each group nearest first; how many
+        off_plane = np.abs(np.einsum("nkd,nd->nk", offset, normal)) >= sin_dist
+        if normals is not None:
+            off_plane |= np.einsum("nkd,nd->nk", normals[1], normals[0]) <= 0
+        return np.argsort(off_plane, axis=1, kind="stable"), (~off_plane).sum(axis=1)
+
     if normals is None:
-        near = points[nbrs[:, :10]]
-        spread = near - near.mean(axis=1, keepdims=True)
-        normal = np.linalg.eigh(spread.transpose(0, 2, 1) @ spread)[1][:, :, 0]
+        fit = min(CONE_FIT, nbrs.shape[1])
+        order, fitted = cone(_plane_normals(centers, near[:, :fit]))
+        order, inside = cone(_plane_normals(centers, np.take_along_axis(near, order[:, :fit, None], axis=1)))
+        settled = (fitted >= fit) & (inside >= k)
     else:
-        normal = normals
-    offset = points[nbrs] - points[:, None]
-    off_plane = np.abs((offset @ normal[:, :, None])[..., 0]) >= np.sin(np.radians(cone_deg)) * np.linalg.norm(
-        offset, axis=2)
-    if normals is not None:
-        off_plane |= (normals[nbrs] @ normals[:, :, None])[..., 0] <= 0
-    return np.take_along_axis(nbrs, np.argsort(off_plane, axis=1, kind="stable"), 1)[:, :k]
+        order, inside = cone(normals[0])
+        settled = inside >= k
+    return np.take_along_axis(nbrs, order[:, :k], axis=1), settled
 
 
 def _cloud_field(points: np.ndarray, t_coef: float, normals: np.ndarray | None = None):

@@ -8,7 +8,8 @@ import pytest
 from gegnn_stores import ellipsoid, fibonacci_sphere, small_config
 
 from gegnn import GeGnn
-from gegnn.pointcloud import cloud_graph, cloud_landmark_fields, knn_edges, mls_project, surface_neighbors
+from gegnn.pointcloud import (_cone_neighbors, cloud_graph, cloud_landmark_fields, knn_edges, mls_project,
+                              surface_neighbors)
 
 
 def test_knn_edges_are_each_pair_once_and_hold_every_points_neighbours():
@@ -159,7 +160,7 @@ def test_train_a_cloud_model_on_a_stores_vertices(tiny_store, tmp_path):
     assert result.exit_code == 0, result.output
     model = GeGnn.from_checkpoint(run / "best.safetensors")
     assert model.config.points == 6 and model.config.landmarks == 8
-    assert (run / "fields.zarr" / "k8-cloud6-surface").exists()  # the cloud's fields, apart from a mesh model's
+    assert (run / "fields.zarr" / "k8-cloud6-surface2").exists()  # the cloud's fields, apart from a mesh model's
     with open(run / "metrics.csv") as f:
         assert float(next(csv.DictReader(f))["val_mre"]) < 1.0
     from gegnn.cli import train  # --points alone (DESIGN's command line) is the shipped model's 8 neighbours
@@ -264,3 +265,19 @@ def test_a_mesh_model_given_a_cloud_names_the_model_that_takes_it(tmp_path):
     for name in ("scan.xyz", "scan.ply"):
         result = CliRunner().invoke(main, ["query", "--pretrained", str(tmp_path / name), "--source", "0"])
         assert result.exit_code == 1 and f"gegnn query --pretrained points {name} --source I" in result.output
+
+
+def test_surface_neighbours_from_2k_candidates_then_6k_where_needed_equal_those_of_all_6k():
+    h = 0.05
+    x, y = np.meshgrid(np.arange(30) * h, np.arange(30) * h)
+    sheet = np.stack([x.ravel(), y.ravel(), 0.1 * np.sin(3 * x.ravel())], axis=1)
+    p = np.concatenate([sheet, sheet + (0.3 * h, 0.4 * h, 1.2 * h)])  # a gap: many rows need the 6k
+    p += np.random.default_rng(0).normal(scale=1e-4 * h, size=p.shape)  # no ties: a scan's order is unique
+    normals = np.repeat([[0, 0, -1.0], [0, 0, 1.0]], len(sheet), axis=0)
+    for given in (None, normals):
+        def among(candidates):
+            nbrs = knn_edges(p, candidates)[1]
+            return _cone_neighbors(p, p[nbrs], nbrs, 15, 30.0, None if given is None else (given, given[nbrs]))[0]
+
+        assert (among(30) != among(90)).any()  # the 2k nearest alone would not do
+        np.testing.assert_array_equal(surface_neighbors(p, 15, normals=given), among(90))
