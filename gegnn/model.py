@@ -196,10 +196,10 @@ class GeGnn(nn.Module):
         Vertices are normalized here (bounding box centered, longest half-extent 1, as in training);
         normals and edges are computed here (a cloud's normals may be given instead); distances from the
         result are in the input's units, between the input's vertices (a cloud's duplicate points share
-        their codes; its ``part`` labels the parts of its neighbour graph). ``device`` (default: where the model is) moves the model there, as
-        ``model.to(device)`` would, and the embedding lives there. ``precision="bf16"`` runs the network
-        under bf16 autocast: ~2x faster on CPUs with AVX512-BF16, embeddings within ~1% (relative norm)
-        of fp32.
+        their codes; its ``part`` labels the parts of its neighbour graph). ``device`` (default: where the
+        model is) moves the model there, as ``model.to(device)`` would, and the embedding lives there.
+        ``precision="bf16"`` runs the network under bf16 autocast: ~2x faster on CPUs with AVX512-BF16,
+        embeddings within ~1% (relative norm) of fp32.
 
         Returns:
             :class:`gegnn.embedding.Embedding`
