@@ -63,7 +63,7 @@ def knn_edges(points: np.ndarray, k: int = KNN) -> tuple[np.ndarray, np.ndarray]
     (N, k) of every point, nearest first. Needs more than k distinct points."""
     from scipy.spatial import cKDTree
 
-    _, nbrs = cKDTree(points).query(points, k + 1)
+    _, nbrs = cKDTree(points).query(points, k + 1, workers=_threads())
     nbrs = nbrs[:, 1:]
     i = np.repeat(np.arange(len(points)), k)
     j = nbrs.ravel()
@@ -86,7 +86,7 @@ def mls_project(points: np.ndarray, k: int = MLS_K) -> np.ndarray:
 
     points = np.asarray(points, dtype=np.float64)
     k = min(k, len(points) - 1)
-    dist, nbrs = cKDTree(points).query(points, k + 1)
+    dist, nbrs = cKDTree(points).query(points, k + 1, workers=_threads())
     radius = np.maximum(dist[:, -1:], 1e-300)
     w = np.exp(-(2.0 * dist / radius) ** 2)
     hood = points[nbrs]
@@ -96,9 +96,13 @@ def mls_project(points: np.ndarray, k: int = MLS_K) -> np.ndarray:
     rel = hood - points[:, None]
     z, v, u = np.moveaxis(rel @ frame, 2, 0)
     sw = np.sqrt(w)
-    a = np.stack([np.ones_like(u), u, v, u * u, u * v, v * v], -1) * sw[..., None]
-    scale = np.concatenate([np.ones((len(u), 1)), radius, radius, radius ** 2, radius ** 2, radius ** 2], 1)
-    a = a / scale[:, None, :]     # columns of comparable size: the normal equations stay well conditioned
+    a = np.empty(u.shape + (6,))  # columns of comparable size: the normal equations stay well conditioned
+    for col, (monomial, scale) in enumerate(((None, None), (u, radius), (v, radius), (u * u, radius ** 2),
+                                             (u * v, radius ** 2), (v * v, radius ** 2))):
+        if monomial is None:
+            a[..., col] = sw
+        else:
+            np.divide(np.multiply(monomial, sw, out=a[..., col]), scale, out=a[..., col])
     normal_eq = a.transpose(0, 2, 1) @ a + 1e-10 * np.eye(6)
     c0 = np.linalg.solve(normal_eq, a.transpose(0, 2, 1) @ (z * sw)[..., None])[:, 0, 0]
     c0 = np.where(np.abs(c0) <= 0.5 * radius[:, 0], c0, 0.0)
@@ -137,10 +141,29 @@ def orient_normals(points: np.ndarray, normals: np.ndarray, edges: np.ndarray) -
         if out[root] @ (points[root] - points[members].mean(axis=0)) < 0:
             out[root] = -out[root]
         order, parent = breadth_first_order(tree, root, directed=False)
-        for v in order[1:]:  # parents come first: each point agrees with its tree parent
-            if out[v] @ out[parent[v]] < 0:
-                out[v] = -out[v]
+        out[order] *= _tree_signs(order, parent, out)[:, None]
     return out, part
+
+
+def _tree_signs(order: np.ndarray, parent: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    r"""The flips (+-1, in ``order``) that make every normal of a tree agree with its parent's flipped
+    one, :math:`n_v \cdot n_{parent(v)} \ge 0` (``order[0]``, the root, stays): the product of the edges'
+    signs up to the root, by pointer jumping (log of the depth passes). A normal at right angles to its
+    parent's is not flipped, and its subtree follows it."""
+    n = len(normals)
+    anchor = np.arange(n)
+    sign = np.ones(n)
+    child = order[1:]
+    dot = np.einsum("ij,ij->i", normals[child], normals[parent[child]])
+    tied = dot != 0
+    anchor[child[tied]] = parent[child[tied]]
+    sign[child] = np.where(dot < 0, -1.0, 1.0)
+    while True:
+        up = anchor[order]
+        if (anchor[up] == up).all():  # every anchor a root (sign 1): the products are complete
+            return sign[order]
+        sign[order] *= sign[up]
+        anchor[order] = anchor[up]
 
 
 def cloud_graph(points: np.ndarray, k: int = KNN, normals: np.ndarray | None = None) -> CloudGraph:
@@ -153,6 +176,13 @@ def cloud_graph(points: np.ndarray, k: int = KNN, normals: np.ndarray | None = N
     else:
         part = graph_parts(len(points), edges)
     return CloudGraph(points, edges, np.asarray(normals, dtype=np.float64), part.astype(np.int64))
+
+
+def _threads() -> int:
+    """Threads for the k-d tree queries: torch's (``OMP_NUM_THREADS``, ``torch.set_num_threads``)."""
+    import torch
+
+    return torch.get_num_threads()
 
 
 def graph_parts(n: int, edges: np.ndarray) -> np.ndarray:
@@ -207,7 +237,7 @@ def surface_neighbors(points: np.ndarray, k: int = HEAT_K, cone_deg: float = CON
     rows = np.arange(len(points))
     for candidates in (2 * k, 6 * k):  # most rows are settled by their 2k nearest: the 6k only where not
         candidates = min(candidates, len(points) - 1)
-        nbrs = tree.query(points[rows], candidates + 1)[1][:, 1:]
+        nbrs = tree.query(points[rows], candidates + 1, workers=_threads())[1][:, 1:]
         out[rows], settled = _cone_neighbors(points[rows], points[nbrs], nbrs, k, cone_deg,
                                              None if normals is None else (normals[rows], normals[nbrs]))
         rows = rows[~settled]

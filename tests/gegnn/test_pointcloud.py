@@ -8,7 +8,7 @@ import pytest
 from gegnn_stores import ellipsoid, fibonacci_sphere, small_config
 
 from gegnn import GeGnn
-from gegnn.pointcloud import (_cone_neighbors, cloud_graph, cloud_landmark_fields, knn_edges, mls_project,
+from gegnn.pointcloud import (_cone_neighbors, _tree_signs, cloud_graph, cloud_landmark_fields, knn_edges, mls_project,
                               surface_neighbors)
 
 
@@ -76,6 +76,22 @@ def test_normals_are_radial_and_outward_on_each_of_two_spheres():
     dots = np.einsum("ij,ij->i", g.normals, radial)
     assert dots.min() > 0.99  # radial, and every one outward: the orientation reached all points
     assert np.array_equal(np.unique(g.part[:800]), [g.part[0]]) and g.part[800] != g.part[0]
+
+
+def test_tree_flips_equal_flipping_each_normal_after_its_parent():
+    rng = np.random.default_rng(3)
+    for n in (1, 2, 50, 2000):
+        order = rng.permutation(n)                       # a random tree, parents before children
+        parent = np.full(n, -9999)
+        parent[order[1:]] = order[rng.integers(0, np.arange(1, n))]
+        normals = rng.integers(-1, 2, size=(n, 3)).astype(float)  # exact dot products, many of them 0
+        expected = normals.copy()
+        for v in order[1:]:
+            if expected[v] @ expected[parent[v]] < 0:
+                expected[v] = -expected[v]
+        flipped = normals.copy()
+        flipped[order] *= _tree_signs(order, parent, normals)[:, None]
+        assert np.array_equal(flipped, expected)
 
 
 def test_landmark_fields_of_a_sphere_are_great_circle_distances():
