@@ -97,12 +97,10 @@ def mls_project(points: np.ndarray, k: int = MLS_K) -> np.ndarray:
     z, v, u = np.moveaxis(rel @ frame, 2, 0)
     sw = np.sqrt(w)
     a = np.empty(u.shape + (6,))  # columns of comparable size: the normal equations stay well conditioned
-    for col, (monomial, scale) in enumerate(((None, None), (u, radius), (v, radius), (u * u, radius ** 2),
-                                             (u * v, radius ** 2), (v * v, radius ** 2))):
-        if monomial is None:
-            a[..., col] = sw
-        else:
-            np.divide(np.multiply(monomial, sw, out=a[..., col]), scale, out=a[..., col])
+    a[..., 0] = sw
+    for col, (monomial, scale) in enumerate(((u, radius), (v, radius), (u * u, radius ** 2),
+                                             (u * v, radius ** 2), (v * v, radius ** 2)), start=1):
+        np.divide(np.multiply(monomial, sw, out=a[..., col]), scale, out=a[..., col])
     normal_eq = a.transpose(0, 2, 1) @ a + 1e-10 * np.eye(6)
     c0 = np.linalg.solve(normal_eq, a.transpose(0, 2, 1) @ (z * sw)[..., None])[:, 0, 0]
     c0 = np.where(np.abs(c0) <= 0.5 * radius[:, 0], c0, 0.0)

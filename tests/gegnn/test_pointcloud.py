@@ -8,8 +8,8 @@ import pytest
 from gegnn_stores import ellipsoid, fibonacci_sphere, small_config
 
 from gegnn import GeGnn
-from gegnn.pointcloud import (_cone_neighbors, _tree_signs, cloud_graph, cloud_landmark_fields, knn_edges, mls_project,
-                              surface_neighbors)
+from gegnn.pointcloud import (_cone_neighbors, _tree_signs, cloud_graph, cloud_landmark_fields, knn_edges,
+                              mls_project, surface_neighbors)
 
 
 def test_knn_edges_are_each_pair_once_and_hold_every_points_neighbours():
