@@ -67,6 +67,7 @@ import math
 
 import numpy as np
 
+from . import threads
 from .heat import DELAUNAY_EPS, HeatSolver, _Cover, _cotan_halves, gradient_divergence, laplacian, relink
 
 __all__ = ["CloudHeatDistance", "K_NEIGHBORS"]
@@ -841,9 +842,14 @@ class CloudHeatDistance(HeatSolver):
             raise ValueError("cloud heat method: non-finite coordinates")
         self.n = len(p)
         neighbors = _nearest(p) if neighbors is None else np.asarray(neighbors, dtype=np.int64)
-        offsets = p[neighbors] - p[:, None, :]
-        self.normals = _normals(offsets)
-        faces = _local_triangles(_tangent_coordinates(offsets, self.normals), neighbors)
+
+        def local(rows):  # each point's normal and local triangles: row by row, on torch's threads
+            offsets = p[neighbors[rows]] - p[rows, None, :]
+            normals = _normals(offsets)
+            faces = _local_triangles(_tangent_coordinates(offsets, normals), neighbors[rows])
+            faces[:, 0] += rows.start
+            return normals, faces
+        self.normals, faces = threads.by_rows(local, self.n)
         self.n_faces = len(faces)
         if np.bincount(faces.ravel(), minlength=self.n).min() == 0:
             raise ValueError("cloud heat method: a point in no local triangle (degenerate neighbourhood)")

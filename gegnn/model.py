@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+from collections.abc import Callable
 from contextlib import nullcontext
 from dataclasses import dataclass
 
@@ -19,6 +20,7 @@ from .decoders import DistanceDecoder, LandmarkDecoder, SpectralDecoder
 from .fields import FieldSpec
 from .graph import Graph, directed_edges
 from .nn import GeoConv, GeoPool, GeoUnpool, Hierarchy, ResBlocks, build_hierarchy
+from .threads import beside
 
 __all__ = ["GeGnnConfig", "GeGnn", "DistanceDecoder", "LandmarkDecoder", "SpectralDecoder"]
 
@@ -222,32 +224,46 @@ class GeGnn(nn.Module):
             (h, fields, scale), expand, part = self.inputs(vertices, faces, device), None, None
         was_training = self.training
         self.eval()
-        autocast = torch.autocast(device.type, dtype=torch.bfloat16) if precision == "bf16" else nullcontext()
-        with autocast, torch.inference_mode():
-            codes = self(h, fields=fields).float()
+
+        def autocast():
+            return torch.autocast(device.type, dtype=torch.bfloat16) if precision == "bf16" else nullcontext()
+
+        def unet():  # autocast and inference mode hold per thread
+            with autocast(), torch.inference_mode():
+                return self._unet(h)
+
+        trunk = beside(unet)  # on another core while the fields are computed here: read only by the codes
+        fields = fields()
+        with autocast(), torch.inference_mode():
+            codes = self.codes(trunk.result(), h, fields).float()
         self.train(was_training)
         if expand is not None:
             codes = codes[torch.as_tensor(expand, device=device)]
         return Embedding(codes, self.distance, scale, vertices=vertices, faces=faces, part=part)
 
-    def inputs(self, vertices: np.ndarray, faces: np.ndarray, device) -> tuple[Hierarchy, Tensor | None, float]:
+    def inputs(self, vertices: np.ndarray, faces: np.ndarray, device) -> tuple[Hierarchy, Callable, float]:
         """What the network reads for one mesh in any units: the GeoPool hierarchy of the normalized mesh
-        (bounding box centered, longest half-extent 1), the landmark fields or spectral codes in normalized
-        units (None for the paper's model) and the scale back to the input's units."""
+        (bounding box centered, longest half-extent 1), a function computing the landmark fields or
+        spectral codes in normalized units (None for the paper's model; the longest step, which the U-Net
+        does not need: :meth:`embed` runs it meanwhile) and the scale back to the input's units."""
         vertices, faces = _validated(vertices, faces)
         center, scale = normalization(vertices)
         scale = scale or 1.0  # a single point: keep units
         mesh = Mesh((vertices - center) / scale, faces)
         graph = self.mesh_graph(mesh.vertices, vertex_normals(mesh).astype(np.float32), unique_edges(mesh.faces))
         spec = FieldSpec.of(self.config)
-        fields = None if spec is None else torch.as_tensor(spec.compute(mesh.vertices, mesh.faces), device=device)
+
+        def fields():
+            return None if spec is None else torch.as_tensor(spec.compute(mesh.vertices, mesh.faces), device=device)
         return self.hierarchy(graph).to(device), fields, scale
 
     def cloud_inputs(self, points: np.ndarray, normals: np.ndarray | None, device):
         """What a point-cloud model reads for one cloud in any units (:mod:`gegnn.pointcloud`): the
-        hierarchy of its distinct points, normalized, their landmark fields, the scale back to the input's
-        units, the distinct point of every input point (N,) and the part of every input point (N,)."""
-        from .pointcloud import cloud_graph, cloud_landmark_fields
+        hierarchy of its distinct points, normalized, a function computing their landmark fields (as in
+        :meth:`inputs`; the heat method is set up here, on all of torch's threads, and the function runs
+        the farthest-point sampling, on one), the scale back to the input's units, the distinct point of
+        every input point (N,) and the part of every input point (N,)."""
+        from .pointcloud import cloud_graph, cloud_landmark_solver
 
         points = np.asarray(points, dtype=np.float64)
         if points.ndim != 2 or points.shape[1] != 3 or not np.isfinite(points).all():
@@ -266,8 +282,10 @@ class GeGnn(nn.Module):
         g = cloud_graph(p, self.config.points, normals)
         graph = self.mesh_graph(g.points, g.normals.astype(np.float32), g.edges)
         spec = FieldSpec.of(self.config)
-        fields = None if spec is None else torch.as_tensor(
-            cloud_landmark_fields(g.points, g.part, spec.size, normals=normals).distances, device=device)
+        solver = None if spec is None else cloud_landmark_solver(g.points, g.part, normals=normals)
+
+        def fields():
+            return None if spec is None else torch.as_tensor(solver(spec.size).distances, device=device)
         expand = expand.reshape(-1)
         return self.hierarchy(graph).to(device), fields, scale, expand, g.part[expand]
 

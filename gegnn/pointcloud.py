@@ -24,16 +24,19 @@ Exact duplicates are merged before any of it and share their point's values.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
 from geodata.mesh import label_groups
 
+from . import threads
 from .landmarks import LandmarkFields, farthest_point_fields
 
 __all__ = ["CloudGraph", "cloud_graph", "mls_project", "surface_neighbors", "knn_edges", "graph_parts",
-           "pca_normals", "orient_normals", "cloud_landmark_fields", "KNN", "CLOUD_T_COEF"]
+           "pca_normals", "orient_normals", "cloud_landmark_fields", "cloud_landmark_solver", "KNN",
+           "CLOUD_T_COEF"]
 
 KNN = 8             # neighbours a point's graph edges and normal come from
 CLOUD_T_COEF = 1.0  # potpourri3d's default time step for point clouds (the mesh fields' 0.5: worse on
@@ -63,7 +66,7 @@ def knn_edges(points: np.ndarray, k: int = KNN) -> tuple[np.ndarray, np.ndarray]
     (N, k) of every point, nearest first. Needs more than k distinct points."""
     from scipy.spatial import cKDTree
 
-    _, nbrs = cKDTree(points).query(points, k + 1, workers=_threads())
+    _, nbrs = cKDTree(points).query(points, k + 1, workers=threads.count())
     nbrs = nbrs[:, 1:]
     i = np.repeat(np.arange(len(points)), k)
     j = nbrs.ravel()
@@ -86,10 +89,15 @@ def mls_project(points: np.ndarray, k: int = MLS_K) -> np.ndarray:
 
     points = np.asarray(points, dtype=np.float64)
     k = min(k, len(points) - 1)
-    dist, nbrs = cKDTree(points).query(points, k + 1, workers=_threads())
+    dist, nbrs = cKDTree(points).query(points, k + 1, workers=threads.count())
+    return threads.by_rows(lambda rows: _mls_step(points[rows], points[nbrs[rows]], dist[rows]), len(points))
+
+
+def _mls_step(points: np.ndarray, hood: np.ndarray, dist: np.ndarray) -> np.ndarray:
+    """:func:`mls_project` of ``points`` (N, 3) with their neighbourhoods ``hood`` (N, k + 1, 3), the point
+    itself first, at distances ``dist`` (N, k + 1)."""
     radius = np.maximum(dist[:, -1:], 1e-300)
     w = np.exp(-(2.0 * dist / radius) ** 2)
-    hood = points[nbrs]
     centroid = (w[..., None] * hood).sum(1) / w.sum(1, keepdims=True)
     spread = (hood - centroid[:, None]) * np.sqrt(w)[..., None]
     _, frame = np.linalg.eigh(spread.transpose(0, 2, 1) @ spread)
@@ -109,7 +117,7 @@ def mls_project(points: np.ndarray, k: int = MLS_K) -> np.ndarray:
 
 def pca_normals(points: np.ndarray, nbrs: np.ndarray) -> np.ndarray:
     """Unit normals (N, 3), unoriented: the least-variance direction of each point with its neighbours."""
-    return _plane_normals(points, points[nbrs])
+    return threads.by_rows(lambda rows: _plane_normals(points[rows], points[nbrs[rows]]), len(points))
 
 
 def _plane_normals(centers: np.ndarray, near: np.ndarray) -> np.ndarray:
@@ -176,13 +184,6 @@ def cloud_graph(points: np.ndarray, k: int = KNN, normals: np.ndarray | None = N
     return CloudGraph(points, edges, np.asarray(normals, dtype=np.float64), part.astype(np.int64))
 
 
-def _threads() -> int:
-    """Threads for the k-d tree queries: torch's (``OMP_NUM_THREADS``, ``torch.set_num_threads``)."""
-    import torch
-
-    return torch.get_num_threads()
-
-
 def graph_parts(n: int, edges: np.ndarray) -> np.ndarray:
     """Connected-component label (N,) of every point of the graph with undirected ``edges``."""
     import scipy.sparse as sp
@@ -198,23 +199,36 @@ def cloud_landmark_fields(points: np.ndarray, part: np.ndarray, k: int, seed: in
     (float32 (N, K)), as :func:`gegnn.landmarks.landmark_fields` on a mesh: deterministic for a given
     cloud, ``k`` and ``seed``; parts of fewer than MIN_PART points get distance 0 (as a mesh's parts of
     fewer than 3 vertices). ``normals``: the cloud's own oriented unit normals, if it has them (see
-    :func:`surface_neighbors`)."""
+    :func:`surface_neighbors`). The same as ``cloud_landmark_solver(points, part, t_coef, normals)(k, seed)``."""
+    return cloud_landmark_solver(points, part, t_coef, normals)(k, seed)
+
+
+def cloud_landmark_solver(points: np.ndarray, part: np.ndarray, t_coef: float = CLOUD_T_COEF,
+                          normals: np.ndarray | None = None) -> Callable[[int, int], LandmarkFields]:
+    """The heat method set up on every part of the graph (neighbours, local triangulations, cover,
+    factors: the rows spread over torch's threads), and a function ``(k, seed) -> LandmarkFields`` giving
+    :func:`cloud_landmark_fields` from it (the farthest-point sampling: one field after the other, on one
+    thread)."""
     n_parts = int(part.max()) + 1
-    out = np.zeros((len(points), k), dtype=np.float32)
-    landmarks = np.zeros((n_parts, k), dtype=np.int64)
-    for c, idx in enumerate(label_groups(part, n_parts)):
-        rng = np.random.default_rng([seed, c])
-        if len(idx) < MIN_PART:
-            landmarks[c] = idx[0]
-            continue
-        n_fields = min(k, len(idx))
-        field = _cloud_field(points[idx], t_coef, None if normals is None else normals[idx])
-        chosen, fields = farthest_point_fields(field, len(idx), n_fields,
-                                               int(rng.integers(len(idx))))
-        cols = np.arange(k) % len(chosen)
-        out[idx] = fields[:, cols]
-        landmarks[c] = idx[np.asarray(chosen)[cols]]
-    return LandmarkFields(out, landmarks, part)
+    groups = label_groups(part, n_parts)
+    solvers = [_cloud_field(points[idx], t_coef, None if normals is None else normals[idx])
+               if len(idx) >= MIN_PART else None for idx in groups]
+
+    def fields(k: int, seed: int = 0) -> LandmarkFields:
+        out = np.zeros((len(points), k), dtype=np.float32)
+        landmarks = np.zeros((n_parts, k), dtype=np.int64)
+        for c, (idx, field) in enumerate(zip(groups, solvers)):
+            rng = np.random.default_rng([seed, c])
+            if field is None:
+                landmarks[c] = idx[0]
+                continue
+            chosen, sampled = farthest_point_fields(field, len(idx), min(k, len(idx)),
+                                                    int(rng.integers(len(idx))))
+            cols = np.arange(k) % len(chosen)
+            out[idx] = sampled[:, cols]
+            landmarks[c] = idx[np.asarray(chosen)[cols]]
+        return LandmarkFields(out, landmarks, part)
+    return fields
 
 
 def surface_neighbors(points: np.ndarray, k: int = HEAT_K, cone_deg: float = CONE_DEG,
@@ -235,9 +249,12 @@ def surface_neighbors(points: np.ndarray, k: int = HEAT_K, cone_deg: float = CON
     rows = np.arange(len(points))
     for candidates in (2 * k, 6 * k):  # most rows are settled by their 2k nearest: the 6k only where not
         candidates = min(candidates, len(points) - 1)
-        nbrs = tree.query(points[rows], candidates + 1, workers=_threads())[1][:, 1:]
-        out[rows], settled = _cone_neighbors(points[rows], points[nbrs], nbrs, k, cone_deg,
-                                             None if normals is None else (normals[rows], normals[nbrs]))
+        nbrs = tree.query(points[rows], candidates + 1, workers=threads.count())[1][:, 1:]
+
+        def cone(block, rows=rows, nbrs=nbrs):
+            return _cone_neighbors(points[rows[block]], points[nbrs[block]], nbrs[block], k, cone_deg,
+                                   None if normals is None else (normals[rows[block]], normals[nbrs[block]]))
+        out[rows], settled = threads.by_rows(cone, len(rows))
         rows = rows[~settled]
         if not len(rows) or candidates == len(points) - 1:
             break
