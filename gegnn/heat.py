@@ -404,7 +404,11 @@ class HeatSolver:
         """Factor (M + tL) and (L + shift I) of ``lap``, ``mass`` and ``self.t``; keep ``grad``, ``div``."""
         if not (np.isfinite(lap.data).all() and np.isfinite(mass).all() and np.isfinite(self.t)):
             raise ValueError(f"{what}: non-finite operators (degenerate input)")
-        self._grad, self._div = grad, div
+        from ._heat_ops import GradientDivergence
+
+        self._grad_div = GradientDivergence(*(np.ascontiguousarray(a, dtype=dt) for m in (grad.tocsr(), div.tocsr())
+                                              for a, dt in ((m.indptr, np.int64), (m.indices, np.int64),
+                                                            (m.data, np.float64))), n=self.n)
         diagonal = np.flatnonzero(lap.indices == np.repeat(np.arange(self.n), np.diff(lap.indptr)))
         heat, poisson = lap.copy(), lap                       # (M + tL), (L + shift I): same pattern
         heat.data *= self.t
@@ -424,7 +428,7 @@ class HeatSolver:
             columns = np.arange(len(chunk))
             rhs = np.zeros((self.n, len(chunk)))
             rhs[chunk, columns] = 1.0
-            phi = self._poisson.solve(self._div @ self._unit_gradient(self._heat.solve(rhs)))
+            phi = self._poisson.solve(self._divergence(self._heat.solve(rhs)))
             out[:, start:start + len(chunk)] = phi - phi[chunk, columns]
         return out
 
@@ -433,21 +437,13 @@ class HeatSolver:
         per-column overhead)."""
         rhs = np.zeros(self.n)
         rhs[source] = 1.0
-        phi = self._poisson.solve(self._div @ self._unit_gradient(self._heat.solve(rhs)))
+        phi = self._poisson.solve(self._divergence(self._heat.solve(rhs))[:, 0])
         return phi - phi[source]
 
-    def _unit_gradient(self, u: np.ndarray) -> np.ndarray:
-        """Per face, grad u / |grad u| (0 where it is 0): (2F,) or (2F, k), x components first."""
-        g = self._grad @ u
-        x, y = g[:len(g) // 2], g[len(g) // 2:]
-        norm = x * x
-        norm += y * y
-        np.sqrt(norm, out=norm)
-        norm[norm <= 0] = 1.0                                 # a zero gradient stays zero
-        np.divide(1.0, norm, out=norm)
-        x *= norm
-        y *= norm
-        return g
+    def _divergence(self, u: np.ndarray) -> np.ndarray:
+        """(N, k): the divergence of the normalized gradient of each column of u, (N,) or (N, k), per face
+        grad u / |grad u| (0 where it is 0), as SciPy's products would give it (src/heat_ops.cpp)."""
+        return self._grad_div(np.ascontiguousarray(u.reshape(len(u), -1)))
 
 
 class HeatDistance(HeatSolver):

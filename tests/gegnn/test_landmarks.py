@@ -286,6 +286,36 @@ def test_heat_many_sources_per_solve_equal_one_at_a_time():
         assert one[s] == 0 and np.abs(many[:, j] - one).max() <= 1e-12 * one.max()
 
 
+def test_heat_gradient_divergence_equals_scipy_products_bit_for_bit(monkeypatch):
+    """The compiled middle step (src/heat_ops.cpp) is SciPy's G u, NumPy's normalization and D X, in their
+    order of sums: one source and several, with a zero gradient (u = 0) kept zero."""
+    import gegnn.heat as heat
+
+    kept = {}
+    factor = heat.HeatSolver._factor
+    monkeypatch.setattr(heat.HeatSolver, "_factor", lambda self, what, lap, mass, grad, div:
+                        kept.update(grad=grad.tocsr(), div=div.tocsr()) or factor(self, what, lap, mass, grad, div))
+    v, f = bumpy_sphere()
+    solver = HeatDistance(v, f)
+    u = np.random.default_rng(0).random((len(v), 3))
+    u[:, 2] = 0.0
+    g = kept["grad"] @ u
+    x, y = g[:len(g) // 2], g[len(g) // 2:]
+    norm = x * x
+    norm += y * y
+    np.sqrt(norm, out=norm)
+    norm[norm <= 0] = 1.0
+    np.divide(1.0, norm, out=norm)
+    x *= norm
+    y *= norm
+    expected = kept["div"] @ g
+    assert (expected[:, 2] == 0).all() and np.abs(expected[:, :2]).max() > 0
+    np.testing.assert_array_equal(solver._divergence(u), expected)
+    np.testing.assert_array_equal(solver._divergence(u[:, 0]), expected[:, :1])
+    with pytest.raises(ValueError, match="one row a vertex"):
+        solver._divergence(u[:-1])
+
+
 def test_heat_refuses_non_manifold_edges_and_landmarks_fall_back_to_potpourri3d():
     v, f = bumpy_sphere()
     a, b = f[0, 0], f[0, 1]
