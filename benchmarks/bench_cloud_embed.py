@@ -1,0 +1,99 @@
+"""The precomputation of a cloud (``GeGnn.embed``: projection, graph, normals, landmark fields, network) and
+of a mesh, on one torch thread and on several, alternated in one process, and where the time goes.
+
+    python benchmarks/bench_cloud_embed.py [--points 5000 8000] [--threads 1 2] [--rounds 10] [--mesh]
+
+bumpy_sphere clouds (``geodata.examples.bumpy_sphere``: its vertices); ``--mesh`` adds the landmark mesh model
+on the same meshes. Each round embeds once per thread count in turn (``torch.set_num_threads``: the k-d
+trees, the blocks of rows and the U-Net beside the landmark loop follow it, gegnn/threads.py), so slow
+spells of a shared machine fall on every setting alike; best and median over the rounds, and the ratio to
+the first thread count's. Then, on the last thread count, the wall-clock span of each step in one embed
+(steps overlap: the U-Net runs beside the farthest-point loop).
+"""
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+import torch
+from bench_results import cpu_description  # benchmarks/ is on sys.path when a script there runs
+
+import gegnn.pointcloud as pointcloud
+from geodata.examples import bumpy_sphere
+from gegnn import GeGnn
+
+STEPS = [(pointcloud, "mls_project", "projection"), (pointcloud, "knn_edges", "k = 8 graph"),
+         (pointcloud, "orient_normals", "normals' orientation"), (pointcloud, "surface_neighbors", "surface neighbours"),
+         (pointcloud, "cloud_landmark_solver", "heat method set up (surface neighbours included)"),
+         (pointcloud, "farthest_point_fields", "128 landmark fields (farthest-point loop)")]
+
+
+def spans(model: GeGnn, points: np.ndarray) -> dict:
+    """Start and end (s, from the call) of each step of one embed."""
+    seen, saved = {}, []
+    t0 = time.perf_counter()
+
+    def traced(fn, name):
+        def run(*args, **kwargs):
+            start = time.perf_counter() - t0
+            out = fn(*args, **kwargs)
+            seen[name] = (start, time.perf_counter() - t0)
+            return out
+        return run
+
+    for module, attr, name in STEPS:
+        saved.append((module, attr, getattr(module, attr)))
+        setattr(module, attr, traced(getattr(module, attr), name))
+    unet = model._unet
+    model._unet = traced(unet, "U-Net (beside the loop)")
+    try:
+        t0 = time.perf_counter()
+        model.embed(points)
+        seen["embed"] = (0.0, time.perf_counter() - t0)
+    finally:
+        model._unet = unet
+        for module, attr, fn in saved:
+            setattr(module, attr, fn)
+    return seen
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--points", type=int, nargs="+", default=[5000, 8000])
+    ap.add_argument("--threads", type=int, nargs="+", default=[1, 2])
+    ap.add_argument("--rounds", type=int, default=10)
+    ap.add_argument("--mesh", action="store_true", help="also the landmark mesh model on the same meshes")
+    args = ap.parse_args()
+    models = {"cloud": GeGnn.pretrained("points")}
+    if args.mesh:
+        models["mesh"] = GeGnn.pretrained("landmark")
+    print(f"{cpu_description()}; torch {torch.__version__}\n")
+    print("| model | points | threads | best s | median s | median / first |\n|---|---:|---:|---:|---:|---:|")
+    for n in args.points:
+        mesh = bumpy_sphere(n)
+        vertices, faces = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces)
+        for name, model in models.items():
+            call = (lambda: model.embed(vertices)) if name == "cloud" else (lambda: model.embed(vertices, faces))
+            times = {t: [] for t in args.threads}
+            call()  # warm-up
+            for _ in range(args.rounds):
+                for t in args.threads:
+                    torch.set_num_threads(t)
+                    start = time.perf_counter()
+                    call()
+                    times[t].append(time.perf_counter() - start)
+            first = float(np.median(times[args.threads[0]]))
+            for t in args.threads:
+                median = float(np.median(times[t]))
+                print(f"| {name} | {len(vertices)} | {t} | {min(times[t]):.3f} | {median:.3f} | {median / first:.2f} |")
+    torch.set_num_threads(args.threads[-1])
+    for n in args.points:
+        seen = spans(models["cloud"], np.asarray(bumpy_sphere(n).vertices, dtype=np.float64))
+        print(f"\nsteps of one cloud embed, {n} points, {args.threads[-1]} threads (start - end, ms):")
+        for name, (a, b) in sorted(seen.items(), key=lambda item: item[1]):
+            print(f"  {1000 * a:6.0f} - {1000 * b:6.0f}  {name}")
+
+
+if __name__ == "__main__":
+    main()
