@@ -4,29 +4,53 @@ of a mesh, on one torch thread and on several, alternated in one process, and wh
     python benchmarks/bench_cloud_embed.py [--points 5000 8000] [--threads 1 2] [--rounds 10] [--mesh]
 
 bumpy_sphere clouds (``geodata.examples.bumpy_sphere``: its vertices); ``--mesh`` adds the landmark mesh model
-on the same meshes. Each round embeds once per thread count in turn (``torch.set_num_threads``: the k-d
-trees, the blocks of rows and the U-Net beside the landmark loop follow it, gegnn/threads.py), so slow
-spells of a shared machine fall on every setting alike; best and median over the rounds, and the ratio to
-the first thread count's. Then, on the last thread count, the wall-clock span of each step in one embed
-(steps overlap: the U-Net runs beside the farthest-point loop).
+on the same meshes. Settings: each thread count (``torch.set_num_threads``: the k-d trees, the blocks of
+rows and the U-Net beside the landmark loop follow it, gegnn/threads.py) and, as the reference, the last
+thread count with every step on the caller's thread one after the other (``by_rows`` and ``beside`` run
+inline: the k-d trees alone on all threads, as before gegnn/threads.py). Each round embeds once per
+setting in turn, so slow spells of a shared machine fall on every setting alike; best and median over
+the rounds, and the median's ratio to the reference's. Then, on the last thread count, the wall-clock
+span of each step in one embed (steps overlap: the U-Net runs beside the farthest-point loop).
 """
 from __future__ import annotations
 
 import argparse
 import time
+from concurrent.futures import Future
+from contextlib import contextmanager, nullcontext
 
 import numpy as np
 import torch
 from bench_results import cpu_description  # benchmarks/ is on sys.path when a script there runs
 
+import gegnn.cloud_heat as cloud_heat
+import gegnn.model
 import gegnn.pointcloud as pointcloud
 from geodata.examples import bumpy_sphere
-from gegnn import GeGnn
+from gegnn import GeGnn, threads
 
 STEPS = [(pointcloud, "mls_project", "projection"), (pointcloud, "knn_edges", "k = 8 graph"),
-         (pointcloud, "orient_normals", "normals' orientation"), (pointcloud, "surface_neighbors", "surface neighbours"),
-         (pointcloud, "cloud_landmark_solver", "heat method set up (surface neighbours included)"),
+         (pointcloud, "orient_normals", "normals' orientation (beside, before the U-Net)"),
+         (pointcloud, "surface_neighbors", "surface neighbours"),
+         (pointcloud, "cloud_landmark_solver", "row-by-row set-up: surface neighbours, local triangulations"),
+         (cloud_heat, "CloudHeatDistance", "cover, flips, operators, factorizations"),
          (pointcloud, "farthest_point_fields", "128 landmark fields (farthest-point loop)")]
+
+
+@contextmanager
+def one_after_the_other():
+    """The reference: blocks of rows as one block, the task beside as a call in line."""
+    def inline(compute):
+        done = Future()
+        done.set_result(compute())
+        return done
+
+    saved = threads.by_rows, gegnn.model.beside
+    threads.by_rows, gegnn.model.beside = (lambda compute, n: compute(slice(0, n))), inline
+    try:
+        yield
+    finally:
+        threads.by_rows, gegnn.model.beside = saved
 
 
 def spans(model: GeGnn, points: np.ndarray) -> dict:
@@ -69,24 +93,27 @@ def main():
     if args.mesh:
         models["mesh"] = GeGnn.pretrained("landmark")
     print(f"{cpu_description()}; torch {torch.__version__}\n")
-    print("| model | points | threads | best s | median s | median / first |\n|---|---:|---:|---:|---:|---:|")
+    print("| model | points | threads | best s | median s | median / reference |\n|---|---:|---|---:|---:|---:|")
     for n in args.points:
         mesh = bumpy_sphere(n)
         vertices, faces = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces)
         for name, model in models.items():
             call = (lambda: model.embed(vertices)) if name == "cloud" else (lambda: model.embed(vertices, faces))
-            times = {t: [] for t in args.threads}
+            settings = [(t, False) for t in args.threads] + [(args.threads[-1], True)]
+            times = {s: [] for s in settings}
             call()  # warm-up
             for _ in range(args.rounds):
-                for t in args.threads:
+                for t, reference in settings:
                     torch.set_num_threads(t)
-                    start = time.perf_counter()
-                    call()
-                    times[t].append(time.perf_counter() - start)
-            first = float(np.median(times[args.threads[0]]))
-            for t in args.threads:
-                median = float(np.median(times[t]))
-                print(f"| {name} | {len(vertices)} | {t} | {min(times[t]):.3f} | {median:.3f} | {median / first:.2f} |")
+                    with one_after_the_other() if reference else nullcontext():
+                        start = time.perf_counter()
+                        call()
+                        times[t, reference].append(time.perf_counter() - start)
+            base = float(np.median(times[settings[-1]]))
+            for (t, reference), values in times.items():
+                median = float(np.median(values))
+                label = f"{t}, one step after the other (reference)" if reference else f"{t}"
+                print(f"| {name} | {len(vertices)} | {label} | {min(values):.3f} | {median:.3f} | {median / base:.2f} |")
     torch.set_num_threads(args.threads[-1])
     for n in args.points:
         seen = spans(models["cloud"], np.asarray(bumpy_sphere(n).vertices, dtype=np.float64))

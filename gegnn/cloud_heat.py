@@ -70,7 +70,7 @@ import numpy as np
 from . import threads
 from .heat import DELAUNAY_EPS, HeatSolver, _Cover, _cotan_halves, gradient_divergence, laplacian, relink
 
-__all__ = ["CloudHeatDistance", "K_NEIGHBORS"]
+__all__ = ["CloudHeatDistance", "local_triangulations", "K_NEIGHBORS"]
 
 K_NEIGHBORS = 30          # geometry-central's PointPositionGeometry::kNeighborSize
 LEAF_SIZE = 10            # nanoflann's default leaf_max_size
@@ -819,6 +819,29 @@ def _distinct_faces(cover: _Cover, h: np.ndarray, n: int) -> tuple[np.ndarray, n
     return keep, weight[keep]
 
 
+def local_triangulations(points, neighbors: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Each point's normal (N, 3) and its local Delaunay triangles, the soup (F, 3) of
+    :class:`CloudHeatDistance` (its ``neighbors``: potpourri3d's 30 nearest where None); row by row, on
+    torch's threads (:func:`gegnn.threads.by_rows`). ValueError for points the method cannot take."""
+    p = np.ascontiguousarray(points, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] != 3 or len(p) <= K_NEIGHBORS:
+        raise ValueError(f"cloud heat method: need (N, 3) points with N > {K_NEIGHBORS}")
+    if not np.isfinite(p).all():
+        raise ValueError("cloud heat method: non-finite coordinates")
+    neighbors = _nearest(p) if neighbors is None else np.asarray(neighbors, dtype=np.int64)
+
+    def local(rows):
+        offsets = p[neighbors[rows]] - p[rows, None, :]
+        normals = _normals(offsets)
+        faces = _local_triangles(_tangent_coordinates(offsets, normals), neighbors[rows])
+        faces[:, 0] += rows.start
+        return normals, faces
+    normals, faces = threads.by_rows(local, len(p))
+    if np.bincount(faces.ravel(), minlength=len(p)).min() == 0:
+        raise ValueError("cloud heat method: a point in no local triangle (degenerate neighbourhood)")
+    return normals, faces
+
+
 class CloudHeatDistance(HeatSolver):
     """potpourri3d's point-cloud heat-method distance on one cloud: neighbourhoods, cover, flips and
     both factorizations once; then :meth:`distance` or :meth:`distances` for any sources.
@@ -828,31 +851,19 @@ class CloudHeatDistance(HeatSolver):
         t_coef: time step over the mean squared cover edge length (potpourri3d's default 1).
         neighbors: (N, k) int, each point's neighbours nearest first, instead of potpourri3d's 30 nearest
             (then the fields are no longer the library's: :func:`gegnn.pointcloud.surface_neighbors`).
+        triangles: ``local_triangulations(points, neighbors)``, where they were made before.
 
     Attributes:
         n: point count; t: the time step; n_faces: soup triangles; n_flips: intrinsic flips made;
         normals: (N, 3) the library's unit normals (unoriented: signs as its SVD leaves them).
     """
 
-    def __init__(self, points, t_coef: float = 1.0, neighbors: np.ndarray | None = None):
+    def __init__(self, points, t_coef: float = 1.0, neighbors: np.ndarray | None = None,
+                 triangles: tuple[np.ndarray, np.ndarray] | None = None):
         p = np.ascontiguousarray(points, dtype=np.float64)
-        if p.ndim != 2 or p.shape[1] != 3 or len(p) <= K_NEIGHBORS:
-            raise ValueError(f"cloud heat method: need (N, 3) points with N > {K_NEIGHBORS}")
-        if not np.isfinite(p).all():
-            raise ValueError("cloud heat method: non-finite coordinates")
+        self.normals, faces = local_triangulations(p, neighbors) if triangles is None else triangles
         self.n = len(p)
-        neighbors = _nearest(p) if neighbors is None else np.asarray(neighbors, dtype=np.int64)
-
-        def local(rows):  # each point's normal and local triangles: row by row, on torch's threads
-            offsets = p[neighbors[rows]] - p[rows, None, :]
-            normals = _normals(offsets)
-            faces = _local_triangles(_tangent_coordinates(offsets, normals), neighbors[rows])
-            faces[:, 0] += rows.start
-            return normals, faces
-        self.normals, faces = threads.by_rows(local, self.n)
         self.n_faces = len(faces)
-        if np.bincount(faces.ravel(), minlength=self.n).min() == 0:
-            raise ValueError("cloud heat method: a point in no local triangle (degenerate neighbourhood)")
         cover = _soup_cover(p, faces)
         self.n_flips = _flip_rounds(cover)
         self.t = t_coef * (cover.length.sum() / len(cover.length)) ** 2

@@ -78,8 +78,8 @@ def finetune(model, vertices, faces, sources: int = 64, held_out: int = 8, steps
 
     t0 = time.perf_counter()
     device = next(model.parameters()).device
-    h, lm_fields, scale = model.inputs(vertices, faces, device)
-    lm_fields = lm_fields()
+    hierarchy, lm_fields, scale = model.inputs(vertices, faces, device)
+    h, lm_fields = hierarchy(), lm_fields()
     mesh = Mesh(np.asarray(vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64))
     train_src, held_src = split_sources(largest_part(mesh), sources, held_out, seed)
     exact = exact_fields(mesh, np.concatenate([train_src, held_src])) / scale  # normalized units

@@ -216,12 +216,12 @@ class GeGnn(nn.Module):
         if self.config.points:
             if faces is not None:
                 raise ValueError("a point-cloud model takes points only (faces=None)")
-            h, fields, scale, expand, part = self.cloud_inputs(vertices, normals, device)
+            hierarchy, fields, scale, expand, part = self.cloud_inputs(vertices, normals, device)
         else:
             if faces is None:
                 raise ValueError("this model embeds meshes: give faces, or use a point-cloud model "
                                  "(trained with gegnn train --points)")
-            (h, fields, scale), expand, part = self.inputs(vertices, faces, device), None, None
+            (hierarchy, fields, scale), expand, part = self.inputs(vertices, faces, device), None, None
         was_training = self.training
         self.eval()
 
@@ -229,40 +229,47 @@ class GeGnn(nn.Module):
             return torch.autocast(device.type, dtype=torch.bfloat16) if precision == "bf16" else nullcontext()
 
         def unet():  # autocast and inference mode hold per thread
+            h = hierarchy()
             with autocast(), torch.inference_mode():
-                return self._unet(h)
+                return h, self._unet(h)
 
         trunk = beside(unet)  # on another core while the fields are computed here: read only by the codes
         fields = fields()
+        h, trunk = trunk.result()
         with autocast(), torch.inference_mode():
-            codes = self.codes(trunk.result(), h, fields).float()
+            codes = self.codes(trunk, h, fields).float()
         self.train(was_training)
         if expand is not None:
             codes = codes[torch.as_tensor(expand, device=device)]
         return Embedding(codes, self.distance, scale, vertices=vertices, faces=faces, part=part)
 
-    def inputs(self, vertices: np.ndarray, faces: np.ndarray, device) -> tuple[Hierarchy, Callable, float]:
-        """What the network reads for one mesh in any units: the GeoPool hierarchy of the normalized mesh
-        (bounding box centered, longest half-extent 1), a function computing the landmark fields or
-        spectral codes in normalized units (None for the paper's model; the longest step, which the U-Net
-        does not need: :meth:`embed` runs it meanwhile) and the scale back to the input's units."""
+    def inputs(self, vertices: np.ndarray, faces: np.ndarray, device) -> tuple[Callable, Callable, float]:
+        """What the network reads for one mesh in any units, as two functions that :meth:`embed` runs side
+        by side (the U-Net does not read the fields; their codes do): one giving the GeoPool hierarchy of
+        the normalized mesh (bounding box centered, longest half-extent 1), one the landmark fields or
+        spectral codes in normalized units (None for the paper's model); and the scale back to the input's
+        units."""
         vertices, faces = _validated(vertices, faces)
         center, scale = normalization(vertices)
         scale = scale or 1.0  # a single point: keep units
         mesh = Mesh((vertices - center) / scale, faces)
-        graph = self.mesh_graph(mesh.vertices, vertex_normals(mesh).astype(np.float32), unique_edges(mesh.faces))
         spec = FieldSpec.of(self.config)
+
+        def hierarchy():
+            graph = self.mesh_graph(mesh.vertices, vertex_normals(mesh).astype(np.float32), unique_edges(mesh.faces))
+            return self.hierarchy(graph).to(device)
 
         def fields():
             return None if spec is None else torch.as_tensor(spec.compute(mesh.vertices, mesh.faces), device=device)
-        return self.hierarchy(graph).to(device), fields, scale
+        return hierarchy, fields, scale
 
     def cloud_inputs(self, points: np.ndarray, normals: np.ndarray | None, device):
-        """What a point-cloud model reads for one cloud in any units (:mod:`gegnn.pointcloud`): the
-        hierarchy of its distinct points, normalized, a function computing their landmark fields (as in
-        :meth:`inputs`; the heat method is set up here, on all of torch's threads, and the function runs
-        the farthest-point sampling, on one), the scale back to the input's units, the distinct point of
-        every input point (N,) and the part of every input point (N,)."""
+        """What a point-cloud model reads for one cloud in any units (:mod:`gegnn.pointcloud`), as
+        :meth:`inputs` gives it for a mesh: a function giving the hierarchy of its distinct points,
+        normalized (their normals estimated there), one giving their landmark fields (the heat method's
+        row-by-row set-up is made here, on all of torch's threads; the rest on one, by the function), the
+        scale back to the input's units; and the distinct point of every input point (N,) and the part of
+        every input point (N,)."""
         from .pointcloud import cloud_graph, cloud_landmark_solver
 
         points = np.asarray(points, dtype=np.float64)
@@ -280,14 +287,16 @@ class GeGnn(nn.Module):
         center, scale = normalization(distinct)
         p = (distinct - center) / scale
         g = cloud_graph(p, self.config.points, normals)
-        graph = self.mesh_graph(g.points, g.normals.astype(np.float32), g.edges)
         spec = FieldSpec.of(self.config)
         solver = None if spec is None else cloud_landmark_solver(g.points, g.part, normals=normals)
+
+        def hierarchy():
+            return self.hierarchy(self.mesh_graph(g.points, g.normals.astype(np.float32), g.edges)).to(device)
 
         def fields():
             return None if spec is None else torch.as_tensor(solver(spec.size).distances, device=device)
         expand = expand.reshape(-1)
-        return self.hierarchy(graph).to(device), fields, scale, expand, g.part[expand]
+        return hierarchy, fields, scale, expand, g.part[expand]
 
     def finetune(self, vertices: np.ndarray, faces: np.ndarray, **options):
         """Finetune in place on one mesh from exact distances of a few of its vertices; returns the

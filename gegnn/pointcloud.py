@@ -25,7 +25,7 @@ Exact duplicates are merged before any of it and share their point's values.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -49,16 +49,22 @@ MIN_PART = 31       # parts of fewer points get no fields (distance 0): potpourr
                     # needs more points than its 30 neighbours
 
 
-@dataclass
 class CloudGraph:
     """A point cloud's graph: the projected ``points`` (N, 3) it is made of (:func:`mls_project`),
-    undirected ``edges`` (E, 2), unit ``normals`` (N, 3) and the part of every point (``part``, (N,),
-    labels 0, 1, ... of the graph's connected components)."""
+    undirected ``edges`` (E, 2), the part of every point (``part``, (N,), labels 0, 1, ... of the graph's
+    connected components) and unit ``normals`` (N, 3): the given ones, or estimated and oriented
+    (:func:`pca_normals` of each point's k ``neighbors``, :func:`orient_normals`) when first read, which
+    only the network does (:meth:`gegnn.GeGnn.embed` reads them beside the landmark fields)."""
 
-    points: np.ndarray
-    edges: np.ndarray
-    normals: np.ndarray
-    part: np.ndarray
+    def __init__(self, points: np.ndarray, edges: np.ndarray, part: np.ndarray, neighbors: np.ndarray,
+                 normals: np.ndarray | None = None):
+        self.points, self.edges, self.part, self.neighbors = points, edges, part, neighbors
+        if normals is not None:
+            self.normals = np.asarray(normals, dtype=np.float64)
+
+    @cached_property
+    def normals(self) -> np.ndarray:
+        return orient_normals(self.points, pca_normals(self.points, self.neighbors), self.edges)[0]
 
 
 def knn_edges(points: np.ndarray, k: int = KNN) -> tuple[np.ndarray, np.ndarray]:
@@ -177,11 +183,7 @@ def cloud_graph(points: np.ndarray, k: int = KNN, normals: np.ndarray | None = N
     (see the module); ``normals``: given ones (used as they are, unit length) instead of estimated."""
     points = mls_project(points)
     edges, nbrs = knn_edges(points, k)
-    if normals is None:
-        normals, part = orient_normals(points, pca_normals(points, nbrs), edges)
-    else:
-        part = graph_parts(len(points), edges)
-    return CloudGraph(points, edges, np.asarray(normals, dtype=np.float64), part.astype(np.int64))
+    return CloudGraph(points, edges, graph_parts(len(points), edges), nbrs, normals)
 
 
 def graph_parts(n: int, edges: np.ndarray) -> np.ndarray:
@@ -205,23 +207,27 @@ def cloud_landmark_fields(points: np.ndarray, part: np.ndarray, k: int, seed: in
 
 def cloud_landmark_solver(points: np.ndarray, part: np.ndarray, t_coef: float = CLOUD_T_COEF,
                           normals: np.ndarray | None = None) -> Callable[[int, int], LandmarkFields]:
-    """The heat method set up on every part of the graph (neighbours, local triangulations, cover,
-    factors: the rows spread over torch's threads), and a function ``(k, seed) -> LandmarkFields`` giving
-    :func:`cloud_landmark_fields` from it (the farthest-point sampling: one field after the other, on one
-    thread)."""
+    """The heat method's row-by-row set-up on every part of the graph (surface neighbours, local
+    triangulations: on all of torch's threads), and a function ``(k, seed) -> LandmarkFields`` giving
+    :func:`cloud_landmark_fields` from it on one thread: the covers and factorizations on its first call,
+    then the farthest-point sampling (one field after the other)."""
     n_parts = int(part.max()) + 1
     groups = label_groups(part, n_parts)
-    solvers = [_cloud_field(points[idx], t_coef, None if normals is None else normals[idx])
-               if len(idx) >= MIN_PART else None for idx in groups]
+    builds = [_cloud_field(points[idx], t_coef, None if normals is None else normals[idx])
+              if len(idx) >= MIN_PART else None for idx in groups]
+    solvers = {}
 
     def fields(k: int, seed: int = 0) -> LandmarkFields:
         out = np.zeros((len(points), k), dtype=np.float32)
         landmarks = np.zeros((n_parts, k), dtype=np.int64)
-        for c, (idx, field) in enumerate(zip(groups, solvers)):
+        for c, (idx, build) in enumerate(zip(groups, builds)):
             rng = np.random.default_rng([seed, c])
-            if field is None:
+            if build is None:
                 landmarks[c] = idx[0]
                 continue
+            if c not in solvers:
+                solvers[c] = build()
+            field = solvers[c]
             chosen, sampled = farthest_point_fields(field, len(idx), min(k, len(idx)),
                                                     int(rng.integers(len(idx))))
             cols = np.arange(k) % len(chosen)
@@ -287,11 +293,13 @@ def _cone_neighbors(centers, near, nbrs, k: int, cone_deg: float, normals) -> tu
 
 
 def _cloud_field(points: np.ndarray, t_coef: float, normals: np.ndarray | None = None):
-    """``field(source) -> (N,)`` of one part by the point-cloud heat method on :func:`surface_neighbors`
-    (on potpourri3d's 30 nearest where those would split the part; :class:`gegnn.cloud_heat.CloudHeatDistance`:
-    0.30 s for 128 landmark fields at 5k points, potpourri3d 0.92 s), potpourri3d itself on clouds that it
-    refuses (a degenerate neighbourhood)."""
-    from .cloud_heat import CloudHeatDistance
+    """The point-cloud heat method on one part, in two steps: its :func:`surface_neighbors` (potpourri3d's
+    30 nearest where those would split the part) and local triangulations now, row by row on torch's
+    threads; and a function building ``field(source) -> (N,)`` from them (:class:`gegnn.cloud_heat.
+    CloudHeatDistance`'s cover, flips and factorizations, on one thread; 0.30 s for 128 landmark fields at
+    5k points, potpourri3d 0.92 s), or from potpourri3d itself on clouds that the method refuses (a
+    degenerate neighbourhood)."""
+    from .cloud_heat import CloudHeatDistance, local_triangulations
 
     points = np.ascontiguousarray(points, dtype=np.float64)
     neighbors = surface_neighbors(points, normals=normals)
@@ -299,7 +307,16 @@ def _cloud_field(points: np.ndarray, t_coef: float, normals: np.ndarray | None =
     if graph_parts(len(points), pairs).max() > 0:  # the cone split the part: the plain nearest keep it whole
         neighbors = None
     try:
-        return CloudHeatDistance(points, t_coef, neighbors).distance
+        triangles = local_triangulations(points, neighbors)
     except ValueError:
+        triangles = None
+
+    def build():
+        try:
+            if triangles is not None:
+                return CloudHeatDistance(points, t_coef, neighbors, triangles).distance
+        except ValueError:
+            pass
         import potpourri3d as pp3d
         return pp3d.PointCloudHeatSolver(points, t_coef=t_coef).compute_distance
+    return build

@@ -160,7 +160,7 @@ def test_a_cloud_model_says_what_it_takes(cloud_model):
 
 def test_given_normals_are_used_as_they_are(cloud_model):
     p = fibonacci_sphere(400)
-    inward = cloud_model.cloud_inputs(p, -p, "cpu")[0].graphs[0].normal.numpy()
+    inward = cloud_model.cloud_inputs(p, -p, "cpu")[0]().graphs[0].normal.numpy()
     np.testing.assert_allclose(inward, -p[np.unique(p, axis=0, return_index=True)[1]], atol=1e-6)
 
 
