@@ -1,7 +1,7 @@
 """Geodesic distances on point clouds made from the validation meshes, against exact mesh geodesics.
 
     python benchmarks/bench_points.py data/val.zarr --model gegnn/weights/gegnn-points-v1.safetensors [--meshes 19]
-        [--kinds clean noisy density 2k surface normals] [--pairs 20000] [--neurogf REPO] [--csv out.csv]
+        [--kinds clean noisy density 2k surface normals] [--pairs 20000] [--neurogf REPO] [--oracle] [--csv out.csv]
 
 Each validation mesh's vertices become clouds (no faces): ``clean`` (all of them), ``noisy`` (Gaussian
 noise of 0.5% of the longest bounding-box side on every coordinate), ``density`` (a random direction
@@ -14,7 +14,10 @@ vertices (sources x all vertices; ``--pairs`` of them per mesh, among the points
 moves the points, not the answer. Compared: the point-cloud model (``--model``), potpourri3d's point-cloud
 heat method (``PointCloudHeatSolver``, one field per source), and the shipped mesh model on the mesh itself
 (the same for every kind), and with ``--neurogf REPO`` NeuroGF's generalizable model from a checkout of its
-repository (benchmarks/neurogf.py). MRE is the training metric, |d - exact| / (exact + 1e-3), averaged over pairs,
+repository (benchmarks/neurogf.py). ``--oracle`` adds the exact geodesic between the cloud points' closest
+points on the mesh (``gegnn.query.exact_at_points``, read linearly inside the faces): what an answer knowing
+the surface exactly gives from these points, 0 on clouds of the vertices and on noisy ones the error that
+the noise itself leaves, since it moves a point along the surface as much as off it. MRE is the training metric, |d - exact| / (exact + 1e-3), averaged over pairs,
 then over meshes. One torch thread; embed = the whole precomputation of a cloud (graph, normals, landmark
 fields, network).
 """
@@ -73,6 +76,19 @@ def heat_method(points: np.ndarray, pairs: np.ndarray) -> np.ndarray:
     return out
 
 
+def exact_between(g, points: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+    """Exact geodesic distances between the closest mesh points of ``points[pairs]`` (one field a source)."""
+    from gegnn.query import exact_at_points
+    from geodata.mesh import Mesh
+
+    mesh = Mesh(np.asarray(g.vertices, dtype=np.float64), np.asarray(g.faces, dtype=np.int64))
+    out = np.empty(len(pairs))
+    for s in np.unique(pairs[:, 0]):
+        rows = np.flatnonzero(pairs[:, 0] == s)
+        out[rows] = exact_at_points(mesh, points, int(s))[0][pairs[rows, 1]]
+    return out
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("store")
@@ -83,6 +99,8 @@ def main():
     ap.add_argument("--no-heat", action="store_true", help="skip the heat method (slow: a field per source)")
     ap.add_argument("--neurogf", metavar="REPO", help="a checkout of github.com/keeganhk/NeuroGF: its generalizable "
                                                      "model as one more column")
+    ap.add_argument("--oracle", action="store_true", help="the exact distances between the points' closest "
+                                                          "surface points as one more column")
     ap.add_argument("--csv")
     args = ap.parse_args()
     torch.set_num_threads(1)
@@ -123,16 +141,18 @@ def main():
                 row["heat"] = mre(heat_method(points, local), truth)
             if args.neurogf:
                 row["neurogf"] = mre(neurogf.distances(points, local), truth)
+            if args.oracle:
+                row["oracle"] = mre(exact_between(g, points, local), truth)
             rows.append(row)
             print(" ".join(f"{k}={v:.4f}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items()), flush=True)
     print(f"\n{cpu_description()}, one torch thread\n\n| cloud | points | ours | heat method (potpourri3d) "
-          "| NeuroGF | mesh model on the mesh | embed s |\n|---|---:|---:|---:|---:|---:|---:|")
+          "| NeuroGF | mesh model on the mesh | exact at the points | embed s |\n|---|---:|---:|---:|---:|---:|---:|---:|")
     for kind in args.kinds:
         r = [x for x in rows if x["kind"] == kind]
         mean = {k: f"{100 * np.mean([x[k] for x in r]):.2f}%" if k in r[0] else "-"
-                for k in ("model", "heat", "neurogf", "mesh_model")}
+                for k in ("model", "heat", "neurogf", "mesh_model", "oracle")}
         print(f"| {kind} | {np.mean([x['points'] for x in r]):.0f} | {mean['model']} | {mean['heat']} | "
-              f"{mean['neurogf']} | {mean['mesh_model']} | {np.mean([x['embed_s'] for x in r]):.2f} |")
+              f"{mean['neurogf']} | {mean['mesh_model']} | {mean['oracle']} | {np.mean([x['embed_s'] for x in r]):.2f} |")
     if args.csv:
         with open(args.csv, "w", newline="") as f:
             w = csv.DictWriter(f, fieldnames=list(rows[0]))
