@@ -337,16 +337,19 @@ def query(files, pretrained, source, pairs_csv, points_file, output, exact, clou
                    "for --exact)  [default: 0]")
 @click.option("--exact", is_flag=True, help="Also the exact fields of the --source vertices: the page shows "
                                             "predicted, exact and relative error for them.")
+@click.option("--mesh", "cloud_mesh", type=click.Path(exists=True, dir_okay=False),
+              help="With a point-cloud model and --exact: the mesh the cloud was taken from.")
 @click.option("--dtype", type=click.Choice(["float32", "float16"]), default="float32", show_default=True,
               help="Codes in the page (float16: half the size; distances move by ~1e-3 relative).")
 @PREPARE_OPTION
 @DEVICE_OPTION
 @PRECISION_OPTION
 @UP_OPTION
-def view(files, pretrained, output, sources, exact, dtype, prepare, device, precision, up):
-    """An interactive page of MESH: coloured by the distance field of a vertex, with isolines; click any
-    vertex and the page decodes its field at once from the codes of one forward pass, with the model's own
-    decoder (no server, no network: one self-contained HTML file for any browser or notebook).
+def view(files, pretrained, output, sources, exact, cloud_mesh, dtype, prepare, device, precision, up):
+    """An interactive page of MESH, or of a point cloud with a point-cloud model: coloured by the distance
+    field of a vertex (a point), with isolines; click any vertex and the page decodes its field at once
+    from the codes of one forward pass, with the model's own decoder (no server, no network: one
+    self-contained HTML file for any browser or notebook).
 
     \b
     Examples:
@@ -354,9 +357,13 @@ def view(files, pretrained, output, sources, exact, dtype, prepare, device, prec
       gegnn view --pretrained bunny.obj --source 0 --source 1234 --exact -o compare.html
       gegnn view --pretrained biharmonic bunny.obj -o biharmonic.html
       gegnn view runs/a/best.safetensors part.obj --dtype float16 -o part.html
+      gegnn view --pretrained points scan.xyz -o scan.html
+      gegnn view --pretrained points scan.xyz --source 0 --exact --mesh scan.obj -o compare.html
 
     The page holds the mesh and the codes (N x 196 values for the landmark model: 5 MB at 5k vertices,
-    half with --dtype float16). With --prepare it shows the remeshed mesh, numbered as such.
+    half with --dtype float16). With --prepare it shows the remeshed mesh, numbered as such. A cloud
+    (.xyz .txt .pts .csv .npy, or a PLY without faces) is drawn as discs of about its points' spacing,
+    numbered as in its file; points far from all others are left out.
     """
     import numpy as np
 
@@ -366,6 +373,13 @@ def view(files, pretrained, output, sources, exact, dtype, prepare, device, prec
 
     spec, (mesh_path,) = _model_and_meshes(files, pretrained)
     _output_suffix(output, (".html", ".htm"))
+    if _model_config(spec, pretrained).points:
+        if prepare:
+            raise click.UsageError("--prepare remeshes a mesh: a point cloud is shown as it is")
+        return _view_cloud(spec, pretrained, mesh_path, sources or (0,), exact, cloud_mesh, output, dtype, device,
+                           precision, up)
+    if cloud_mesh:
+        raise click.UsageError("--mesh goes with a point-cloud model (the file is the mesh here)")
     qm = _load_mesh(mesh_path, prepare)
     sources = sources or (0,)
     try:
@@ -535,6 +549,75 @@ def _query_points(model_spec, pretrained, mesh_path, points_file, output, suffix
         click.echo(f"written {output}")
 
 
+def _view_cloud(model_spec, pretrained, cloud_path, sources, exact, mesh_path, output, dtype, device, precision,
+                up):
+    """``gegnn view`` with a point-cloud model: the page of the cloud's points (outliers left out)."""
+    import numpy as np
+
+    from geodata.mesh import MeshError
+
+    from .viewer import view_page
+
+    name = Path(cloud_path).name
+    if exact and not mesh_path:
+        raise click.UsageError("--exact with a point cloud needs --mesh MESH, the surface it was taken from")
+    cloud, keep = _load_cloud(cloud_path, sources)
+    local = [int(np.searchsorted(keep, s)) for s in sources]
+    points = cloud.points[keep]
+    normals = None if cloud.normals is None else cloud.normals[keep]
+    model = _load_model(model_spec, pretrained, device, clouds=True)
+    fields = {}
+    if exact:
+        from .query import exact_at_points, load_query_mesh
+        try:
+            qm = load_query_mesh(mesh_path)
+            fields = {s: exact_at_points(qm.mesh, points, s, model.config.distance)[0] for s in local}
+        except MeshError as exc:
+            raise click.ClickException(f"{mesh_path}: --exact: {exc.reason}") from None
+    try:
+        emb = model.embed(points, normals=normals, precision=precision)
+    except ValueError as exc:
+        raise click.ClickException(f"{cloud_path}: {exc}") from None
+    label = f"--pretrained {model_spec}" if pretrained else Path(model_spec).name
+    page = view_page(emb, title=f"{name}: {model.config.distance} distance predicted by GeGnn",
+                     meta=f"{len(points):,} points of {len(cloud.points):,}"
+                          f"{'' if normals is None else ' with normals'}; {int(emb.part.max()) + 1} part(s) in the "
+                          f"{model.config.points}-neighbour graph; model {label}; distances in the cloud's units",
+                     sources=local, exact=fields, file_index=keep, up=up, dtype=dtype, normals=normals)
+    Path(output).write_text(page, encoding="utf-8")
+    click.echo(f"{name}: {len(points):,} points; written {output} ({len(page) / 2 ** 20:.1f} MB): open it in a "
+               "browser")
+
+
+def _load_cloud(cloud_path, sources):
+    """A cloud file and its points that are not far outliers (sorted indices), after checking that every
+    source is one of them; its notes and the outliers' count echoed."""
+    import numpy as np
+
+    from geodata.mesh import MeshError
+    from geodata.stages.cloud import load_cloud_file, outliers
+
+    name = Path(cloud_path).name
+    try:
+        cloud = load_cloud_file(cloud_path)
+    except MeshError as exc:
+        raise click.ClickException(f"{cloud_path}: {exc.reason}") from None
+    n = len(cloud.points)
+    for note in cloud.notes:
+        click.echo(f"{name}: note: {note}")
+    far = outliers(cloud.points)
+    for source in sources:
+        if not 0 <= source < n:
+            raise click.ClickException(f"{cloud_path}: point {source} out of range: {name} has {n} points")
+        if source in far:
+            raise click.ClickException(f"{cloud_path}: point {source} is far from all other points (an outlier): "
+                                       "no distances from it")
+    if len(far):
+        click.echo(f"{name}: note: {len(far)} points far from all others (the first: point {far[0]}) are left out "
+                   "(NaN)")
+    return cloud, np.setdiff1d(np.arange(n), far)
+
+
 def _query_cloud(model_spec, pretrained, cloud_path, source, output, suffix, exact, mesh_path, device, precision,
                  up, size):
     """``gegnn query`` with a point-cloud model: the field of point ``source`` over the cloud, NaN at outliers
@@ -542,30 +625,14 @@ def _query_cloud(model_spec, pretrained, cloud_path, source, output, suffix, exa
     import numpy as np
 
     from geodata.mesh import MeshError
-    from geodata.stages.cloud import load_cloud_file, outliers
 
     from .query import relative_errors
 
     name = Path(cloud_path).name
-    try:
-        cloud = load_cloud_file(cloud_path)
-    except MeshError as exc:
-        raise click.ClickException(f"{cloud_path}: {exc.reason}") from None
-    points, n = cloud.points, len(cloud.points)
-    for note in cloud.notes:
-        click.echo(f"{name}: note: {note}")
-    if not 0 <= source < n:
-        raise click.ClickException(f"{cloud_path}: point {source} out of range: {name} has {n} points")
-    far = outliers(points)
-    if source in far:
-        raise click.ClickException(f"{cloud_path}: point {source} is far from all other points (an outlier): "
-                                   "no distances from it")
-    if len(far):
-        click.echo(f"{name}: note: {len(far)} points far from all others (the first: point {far[0]}) are left out "
-                   "(NaN)")
     if exact and not mesh_path:
         raise click.UsageError("--exact with a point cloud needs --mesh MESH, the surface it was taken from")
-    keep = np.setdiff1d(np.arange(n), far)
+    cloud, keep = _load_cloud(cloud_path, [source])
+    points, n = cloud.points, len(cloud.points)
     model = _load_model(model_spec, pretrained, device, clouds=True)
     normals = None if cloud.normals is None else cloud.normals[keep]
     try:
@@ -669,8 +736,8 @@ def _load_model(spec, pretrained, device, clouds: bool = False):
 
     model = GeGnn.pretrained(spec) if pretrained else GeGnn.from_checkpoint(spec)
     if model.config.points and not clouds:
-        raise click.UsageError(f"{spec} is a point-cloud model: it answers gegnn query on a cloud "
-                               "(--source I); this command takes a mesh model")
+        raise click.UsageError(f"{spec} is a point-cloud model: it answers gegnn query and gegnn view on a "
+                               "cloud; this command takes a mesh model")
     return model.to(pick_device(device))
 
 

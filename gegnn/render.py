@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 __all__ = ["View", "UP_AXES", "up_axis", "tipping_margin", "default_view", "project", "rasterize", "shade_field",
-           "shade_points", "checkerboard", "visible_polyline",
+           "shade_points", "point_spacing", "checkerboard", "visible_polyline",
            "Panel", "Row", "save_panels"]
 
 
@@ -240,19 +240,28 @@ def shade_field(vertices, faces, field, view: View, *, size=512, cmap="viridis",
     return rgba
 
 
+POINT_DISC = 1.6  # a cloud's disc radius in point_spacing: random samples leave holes under ~1.4 (the
+                  # back showing through), and only where points are sparser than in 1% of a disc's area
+
+
+def point_spacing(points: np.ndarray) -> float:
+    """A cloud's spacing: half the median distance of a point to its 8th nearest (robust to duplicates and
+    near-duplicates); 0 for 8 points or fewer."""
+    from scipy.spatial import cKDTree
+
+    return float(0.5 * np.median(cKDTree(points).query(points, 9)[0][:, -1])) if len(points) > 8 else 0.0
+
+
 def shade_points(points, field, view: View, *, normals=None, size=512, cmap="viridis", vmin=None, vmax=None,
                  isolines: int = 12, marker: int | None = None) -> np.ndarray:
     """RGBA image (H, W, 4) of a point cloud coloured by ``field`` (per point): every point a disc of
-    about the cloud's spacing, the nearest in front, lit by its normal (``normals``; unlit without), with
-    ``isolines`` where neighbouring discs fall in different levels; ``marker``: a red dot on that point."""
-    from scipy.spatial import cKDTree
-
+    radius POINT_DISC :func:`point_spacing`, the nearest in front, lit by its normal (``normals``; unlit without),
+    with ``isolines`` where neighbouring discs fall in different levels; ``marker``: a red dot on that
+    point."""
     xy, depth = project(points, view, points, size)
     plane = (points - view.center) @ view.rotation[:2].T
     pixels_per_unit = np.ptp(xy, axis=0).max() / max(np.ptp(plane, axis=0).max(), 1e-12)  # project's scale
-    # The spacing: half the distance to the 8th nearest point (robust to duplicates and near-duplicates).
-    spacing = 0.5 * np.median(cKDTree(points).query(points, 9)[0][:, -1]) if len(points) > 8 else 0.0
-    r = max(1.0, 0.9 * spacing * pixels_per_unit)
+    r = max(1.0, POINT_DISC * point_spacing(points) * pixels_per_unit)
     oy, ox = np.mgrid[-int(np.ceil(r)):int(np.ceil(r)) + 1, -int(np.ceil(r)):int(np.ceil(r)) + 1]
     disc = np.stack([ox.ravel(), oy.ravel()], axis=1)[(ox ** 2 + oy ** 2).ravel() <= r * r]
     px = np.floor(xy).astype(np.int64)[:, None, :] + disc[None]

@@ -1,6 +1,7 @@
-"""One self-contained HTML page of a mesh and its learned distance fields (``gegnn view``).
+"""One self-contained HTML page of a mesh, or of a point cloud, and its learned distance fields (``gegnn view``).
 
-The page carries the mesh, the per-vertex codes of one forward pass (:class:`gegnn.embedding.Embedding`)
+The page carries the mesh (or the cloud: its points drawn as discs of about their spacing, lit by their
+normals), the per-vertex codes of one forward pass (:class:`gegnn.embedding.Embedding`)
 and the decoder's weights, and decodes the field of any clicked vertex itself, with the same formulas as
 :mod:`gegnn.decoders` (``assets/viewer.js``): the constant-time query, one per vertex, in the browser. It
 needs no network and no server (the script is inlined), so it opens from a laptop's disk, from a copy of a
@@ -20,7 +21,7 @@ from torch import nn
 from geodata.mesh import Mesh, vertex_components
 
 from .decoders import MAX_LOG_RATIO, DistanceDecoder, LandmarkDecoder, SpectralDecoder
-from .render import UP_AXES, default_view, up_axis
+from .render import POINT_DISC, UP_AXES, default_view, point_spacing, up_axis
 from .spectral import S_MAX
 from .train import METRIC_EPS
 
@@ -56,8 +57,10 @@ def _colormap(name: str) -> dict:
 
 
 def view_page(emb, *, title: str, meta: str = "", sources=(0,), exact: dict | None = None,
-              file_index: np.ndarray | None = None, up: str | None = None, dtype: str = "float32") -> str:
-    """The HTML page of ``emb`` (an :class:`~gegnn.embedding.Embedding` with its mesh).
+              file_index: np.ndarray | None = None, up: str | None = None, dtype: str = "float32",
+              normals: np.ndarray | None = None) -> str:
+    """The HTML page of ``emb`` (an :class:`~gegnn.embedding.Embedding` with its mesh, or of a point cloud:
+    its points and parts, as a point-cloud model's ``embed`` gives it).
 
     Args:
         title, meta: the page's heading and the line under it (plain text).
@@ -69,10 +72,13 @@ def view_page(emb, *, title: str, meta: str = "", sources=(0,), exact: dict | No
         up: the up axis (a key of UP_AXES; default :func:`gegnn.render.up_axis`); the camera turns about it.
         dtype: of the codes in the page: "float32", or "float16" for half the size (distances then move
             by ~1e-3 relative).
+        normals: a cloud's normals (N, 3), for the light only (either sign); estimated where None (the
+            least-variance direction of each point's 8 nearest).
     """
     vertices, faces = emb.vertices, emb.faces
-    if vertices is None or faces is None:
-        raise ValueError("the embedding has no mesh: make it with GeGnn.embed")
+    cloud = faces is None and emb.part is not None
+    if vertices is None or (faces is None and not cloud):
+        raise ValueError("the embedding has no mesh or cloud: make it with GeGnn.embed")
     codes = emb.features.float().cpu().numpy()
     if dtype == "float16" and np.abs(codes).max() > np.finfo(np.float16).max:
         raise ValueError("the codes exceed float16's range: use float32")
@@ -80,12 +86,18 @@ def view_page(emb, *, title: str, meta: str = "", sources=(0,), exact: dict | No
     u = np.asarray(UP_AXES[up])
     toward = default_view(vertices, faces, up).rotation[2]
     horizontal = toward - (toward @ u) * u
+    if cloud:
+        from .pointcloud import knn_edges, pca_normals
+        if normals is None:
+            normals = pca_normals(vertices, knn_edges(vertices, 8)[1])
     data = {
         "vertices": _blob(vertices, "float32"),
-        "faces": _blob(faces, "uint32"),
+        "faces": None if cloud else _blob(faces, "uint32"),
+        "normals": _blob(normals, "float32") if cloud else None,
+        "point_radius": POINT_DISC * point_spacing(vertices) if cloud else 0.0,
         "codes": _blob(codes, dtype),
         "code_width": codes.shape[1],
-        "component": _blob(vertex_components(Mesh(vertices, faces)), "int32"),
+        "component": _blob(emb.part if cloud else vertex_components(Mesh(vertices, faces)), "int32"),
         "file_index": None if file_index is None else _blob(file_index, "int32"),
         "scale": emb.scale,
         "metric_offset": METRIC_EPS * emb.scale,
@@ -99,6 +111,6 @@ def view_page(emb, *, title: str, meta: str = "", sources=(0,), exact: dict | No
     }
     assets = files("gegnn") / "assets"
     return Template((assets / "viewer.html").read_text(encoding="utf-8")).substitute(
-        title=html.escape(title), meta=html.escape(meta),
+        title=html.escape(title), meta=html.escape(meta), item="point" if cloud else "vertex",
         data=json.dumps(data, separators=(",", ":")).replace("</", "<\\/"),
         script=(assets / "viewer.js").read_text(encoding="utf-8"))

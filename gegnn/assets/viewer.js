@@ -1,7 +1,8 @@
-// gegnn view: a mesh coloured by the geodesic field of one vertex, the field decoded in the page from the
-// per-vertex codes of one forward pass with the model's own decoder (gegnn/decoders.py, the same formulas).
-// Drawn by a small z-buffer rasterizer into a 2D canvas (as gegnn/render.py draws PNGs): no WebGL, no
-// network, nothing but this file and the data the page carries.
+// gegnn view: a mesh (or a point cloud) coloured by the geodesic field of one vertex, the field decoded in the
+// page from the per-vertex codes of one forward pass with the model's own decoder (gegnn/decoders.py, the same
+// formulas). Drawn by a small z-buffer rasterizer into a 2D canvas (as gegnn/render.py draws PNGs: a cloud's
+// points as discs of about their spacing): no WebGL, no network, nothing but this file and the data the page
+// carries.
 "use strict";
 (function () {
   const DATA = JSON.parse(document.getElementById("gegnn-data").textContent);
@@ -26,7 +27,9 @@
     if (blob.dtype === "float16") return halfToFloat(new Uint16Array(buf));
     return new { float32: Float32Array, uint32: Uint32Array, int32: Int32Array, uint8: Uint8Array }[blob.dtype](buf);
   }
-  const V = array(DATA.vertices), F = array(DATA.faces), CODES = array(DATA.codes);
+  const CLOUD = !DATA.faces;  // a point cloud: no faces; its normals light its points
+  const V = array(DATA.vertices), F = CLOUD ? new Uint32Array(0) : array(DATA.faces), CODES = array(DATA.codes);
+  const NORMALS = CLOUD ? array(DATA.normals) : null;
   const COMPONENT = array(DATA.component), N = V.length / 3, NF = F.length / 3, C = DATA.code_width;
   const LABEL = DATA.file_index ? array(DATA.file_index) : null;  // mesh vertex -> the file's numbering
   const EXACT = {};
@@ -161,8 +164,9 @@
     draw();
   }
 
+  function pixelsPerUnit() { return zoom * 0.47 * Math.min(W, H) / RADIUS; }
   function projectAll(R) {
-    const s = zoom * 0.47 * Math.min(W, H) / RADIUS, [c0, c1, c2] = cam.center;
+    const s = pixelsPerUnit(), [c0, c1, c2] = cam.center;
     for (let v = 0; v < N; v++) {
       const x = V[3 * v] - c0, y = V[3 * v + 1] - c1, z = V[3 * v + 2] - c2;
       SX[v] = W / 2 + panX + s * (R[0][0] * x + R[0][1] * y + R[0][2] * z);
@@ -174,6 +178,7 @@
   function rasterize(R, values) {
     projectAll(R);
     zbuf.fill(-Infinity); fbuf.fill(-1);
+    if (CLOUD) { splat(R, values); return; }
     const t = R[2];
     for (let f = 0; f < NF; f++) {
       const a = F[3 * f], b = F[3 * f + 1], c = F[3 * f + 2];
@@ -200,6 +205,23 @@
           if (z <= zbuf[i]) continue;
           zbuf[i] = z; fbuf[i] = f; light[i] = faceLight[f];
           vbuf[i] = l0 * va + l1 * vb + l2 * vc;
+        }
+      }
+    }
+  }
+
+  function splat(R, values) {  // a cloud: every point a disc, the nearest in front; fbuf holds the point
+    const r = Math.max(1, DATA.point_radius * pixelsPerUnit()), reach = Math.ceil(r), t = R[2];
+    for (let v = 0; v < N; v++) {
+      const lit = 0.45 + 0.55 * Math.abs(NORMALS[3 * v] * t[0] + NORMALS[3 * v + 1] * t[1] + NORMALS[3 * v + 2] * t[2]);
+      const cx = Math.floor(SX[v]), cy = Math.floor(SY[v]), z = SZ[v], value = values[v];
+      for (let dy = -reach; dy <= reach; dy++) {
+        const y = cy + dy;
+        if (y < 0 || y >= H) continue;
+        for (let dx = -reach; dx <= reach; dx++) {
+          const x = cx + dx, i = y * W + x;
+          if (x < 0 || x >= W || dx * dx + dy * dy > r * r || z <= zbuf[i]) continue;
+          zbuf[i] = z; fbuf[i] = v; light[i] = lit; vbuf[i] = value;
         }
       }
     }
@@ -282,7 +304,10 @@
 
   // -- the panel ---------------------------------------------------------------------------------------
   const $ = (id) => document.getElementById(id);
-  function label(v) { return LABEL ? `vertex ${LABEL[v]}` : `vertex ${v} (of the remeshed mesh)`; }
+  function label(v) {
+    const what = CLOUD ? "point" : "vertex";
+    return LABEL ? `${what} ${LABEL[v]}` : `${what} ${v}${CLOUD ? "" : " (of the remeshed mesh)"}`;
+  }
   function fmt(x) { return Number.isNaN(x) ? "no distance (another part)" : x.toPrecision(4); }
 
   function colorbar(lut, vmin, vmax) {
@@ -321,11 +346,12 @@
     draw();
   }
 
-  function pick(clientX, clientY) {  // the vertex of the drawn face nearest the pixel, or -1
+  function pick(clientX, clientY) {  // the vertex of the drawn face nearest the pixel (a cloud's drawn point), or -1
     const box = canvas.getBoundingClientRect(), x = Math.floor(clientX - box.left), y = Math.floor(clientY - box.top);
     if (x < 0 || y < 0 || x >= W || y >= H) return [-1, NaN];
     const f = fbuf[y * W + x];
     if (f < 0) return [-1, NaN];
+    if (CLOUD) return [f, vbuf[y * W + x]];
     let best = -1, bestD = Infinity;
     for (let k = 0; k < 3; k++) {
       const v = F[3 * f + k], d = Math.hypot(SX[v] - x - 0.5, SY[v] - y - 0.5);

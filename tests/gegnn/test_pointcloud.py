@@ -238,11 +238,14 @@ def test_mesh_commands_refuse_a_point_cloud_model(cloud_model, tmp_path):
 
     cloud_model.save(tmp_path / "cloud.safetensors")
     trimesh.creation.icosphere(2).export(tmp_path / "m.obj")
-    for command in (["view", "-o", str(tmp_path / "v.html")], ["pairwise", "-o", str(tmp_path / "d.npy")],
-                    ["texture", "--center", "0", "-o", str(tmp_path / "t.png")]):
+    for command in (["pairwise", "-o", str(tmp_path / "d.npy")], ["texture", "--center", "0", "-o", str(tmp_path / "t.png")]):
         result = CliRunner().invoke(main, [command[0], str(tmp_path / "cloud.safetensors"), str(tmp_path / "m.obj"),
                                            *command[1:]])
         assert result.exit_code == 2 and "is a point-cloud model" in result.output, result.output
+    for command in (["view", "-o", str(tmp_path / "v.html")], ["query", "--source", "0"]):  # these take clouds
+        result = CliRunner().invoke(main, [command[0], str(tmp_path / "cloud.safetensors"), str(tmp_path / "m.obj"),
+                                           *command[1:]])
+        assert result.exit_code == 1 and "m.obj: not a point-cloud file" in result.output, result.output
 
 
 def test_export_points_turns_a_landmark_mesh_model_into_a_cloud_model_of_the_same_weights(tmp_path):

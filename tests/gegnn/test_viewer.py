@@ -172,3 +172,78 @@ def test_gegnn_view_numbers_vertices_as_the_file_does(browser, tmp_path):
     assert "source: vertex 3 ·" in page.inner_text("#gegnn-source")
     assert "mean relative error vs exact" in page.inner_text("#gegnn-source")
     page.close()
+
+
+@pytest.fixture(scope="module")
+def cloud():
+    """Two parts: a sphere of 1,200 points and a smaller one of 300 beside it."""
+    from gegnn_stores import fibonacci_sphere
+    return np.concatenate([fibonacci_sphere(1200), fibonacci_sphere(300, center=(3.0, 0.0, 0.0), radius=0.5)])
+
+
+def test_a_cloud_page_draws_points_and_decodes_the_clicked_points_field(browser, tmp_path, cloud):
+    """A point-cloud model's page: the points drawn as discs, the field of any point decoded in the page
+    (Embedding's, NaN on the other part), a click on a disc making its point the source."""
+    emb = GeGnn.pretrained("points").embed(cloud)
+    assert emb.faces is None and emb.part.max() == 1
+    page = open_page(browser, tmp_path, view_page(emb, title="cloud", sources=[0]))
+    for source in (0, 700, 1350):
+        expected = np.where(emb.part == emb.part[source], emb.field(source), np.nan)
+        np.testing.assert_allclose(np.array(page.evaluate(f"gegnn.field({source})"), dtype=float), expected,
+                                   rtol=2e-5, atol=1e-6 * emb.scale)
+    before = canvas_pixels(page)
+    drawn = (before < 250).any(axis=2)
+    assert drawn.mean() > 0.05 and len(np.unique(before[drawn] // 8, axis=0)) > 50
+    box = page.locator("#gegnn-canvas").bounding_box()
+    x, y = box["x"] + box["width"] * 0.45, box["y"] + box["height"] * 0.5  # on the big sphere
+    target = page.evaluate(f"gegnn.pick({x}, {y})")
+    assert 0 < target < 1200
+    assert np.hypot(*(np.array(page.evaluate(f"gegnn.screen({target})")) - [x, y])) < 15  # its disc is there
+    frames = int(page.evaluate("document.body.dataset.frames"))
+    page.mouse.click(x, y)
+    page.wait_for_function(f"document.body.dataset.frames > {frames}")
+    assert page.evaluate("gegnn.source()") == target and f"point {target}" in page.inner_text("#gegnn-source")
+    shown = np.array(page.evaluate("gegnn.shown()"), dtype=float)
+    np.testing.assert_allclose(shown, np.where(emb.part == 0, emb.field(target), np.nan), rtol=2e-5,
+                               atol=1e-6 * emb.scale)
+    assert (np.abs(canvas_pixels(page) - before).sum(axis=2) > 30).mean() > 0.02  # the picture changed
+    page.close()
+
+
+def test_gegnn_view_of_a_cloud_numbers_points_as_the_file_does(browser, tmp_path, cloud):
+    """A cloud file with an outlier at point 0: the page leaves it out and still says the file's numbers;
+    --exact --mesh gives the exact fields at the points."""
+    import base64
+    import json
+
+    import trimesh
+    from click.testing import CliRunner
+
+    from gegnn.cli import main
+
+    np.savetxt(tmp_path / "c.xyz", np.concatenate([[[60.0, 0.0, 0.0]], cloud[:1200]]))
+    trimesh.creation.icosphere(4).export(tmp_path / "sphere.obj")
+    args = ["view", "--pretrained", "points", str(tmp_path / "c.xyz"), "-o", str(tmp_path / "c.html")]
+    result = CliRunner().invoke(main, args + ["--source", "5", "--source", "800", "--exact"])
+    assert result.exit_code == 2 and "--exact with a point cloud needs --mesh" in result.output, result.output
+    result = CliRunner().invoke(main, args + ["--source", "0"])
+    assert result.exit_code == 1 and "point 0 is far from all other points" in result.output, result.output
+    result = CliRunner().invoke(main, args + ["--source", "5", "--source", "800", "--exact", "--mesh",
+                                              str(tmp_path / "sphere.obj")])
+    assert result.exit_code == 0, result.output
+    assert "1 points far from all others (the first: point 0)" in result.output and "written" in result.output
+    text = (tmp_path / "c.html").read_text()
+    data = json.loads(re.search(r'<script id="gegnn-data" type="application/json">(.*?)</script>', text).group(1))
+    file_index = np.frombuffer(base64.b64decode(data["file_index"]["data"]), dtype="<i4")
+    assert file_index.tolist() == list(range(1, 1201)) and file_index[data["sources"]].tolist() == [5, 800]
+    exact = np.frombuffer(base64.b64decode(data["exact"][str(data["sources"][0])]["data"]), dtype="<f4")
+    great_circle = np.arccos(np.clip(cloud[:1200] @ cloud[4], -1, 1))  # file point 5 is cloud point 4
+    far = great_circle > 0.3
+    assert np.mean(np.abs(exact[far] - great_circle[far]) / great_circle[far]) < 0.01
+    page = browser.new_page()
+    page.goto((tmp_path / "c.html").as_uri())
+    page.wait_for_function("document.body.dataset.frames >= 1", timeout=60_000)
+    assert "source: point 5 ·" in page.inner_text("#gegnn-source")
+    assert "mean relative error vs exact" in page.inner_text("#gegnn-source")
+    assert "click: the field of that point" in page.inner_text("body")
+    page.close()
