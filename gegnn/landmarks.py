@@ -24,6 +24,7 @@ on the 5,224-vertex validation dragon, one core of a 2-core EPYC: 0.15-0.19 s (s
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -32,7 +33,7 @@ from geodata.mesh import Mesh, label_groups, vertex_components
 
 from .heat import HeatDistance
 
-__all__ = ["LandmarkFields", "landmark_fields", "farthest_point_fields", "T_COEF"]
+__all__ = ["LandmarkFields", "landmark_fields", "landmark_solver", "farthest_point_fields", "T_COEF"]
 
 T_COEF = 0.5
 TIE = 1e-9  # farthest-point ties: relative to the largest distance
@@ -67,7 +68,8 @@ def landmark_fields(vertices, faces, k: int, seed: int = 0, t_coef: float = T_CO
     Deterministic for a given mesh, ``k`` and ``seed`` (the seed picks each component's first
     landmark). Components of fewer than 3 vertices or without faces (unused vertices) get distance 0
     to themselves. Non-finite solver output (possible on badly broken meshes) is replaced by the
-    field's largest finite value, so the result is always finite and non-negative.
+    field's largest finite value, so the result is always finite and non-negative. The same as
+    ``landmark_solver(vertices, faces, k, t_coef)(seed)``.
 
     Args:
         vertices: (N, 3) float.
@@ -79,33 +81,46 @@ def landmark_fields(vertices, faces, k: int, seed: int = 0, t_coef: float = T_CO
     Returns:
         :class:`LandmarkFields`
     """
+    return landmark_solver(vertices, faces, k, t_coef)(seed)
+
+
+def landmark_solver(vertices, faces, k: int, t_coef: float = T_COEF) -> Callable[[int], LandmarkFields]:
+    """``seed -> LandmarkFields``: :func:`landmark_fields` of one mesh for any seed, each component's heat
+    method set up once (on the first call) and sampled for every seed."""
     if k < 1:
         raise ValueError(f"k must be >= 1, got {k}")
     mesh = Mesh(vertices, faces)
     labels = vertex_components(mesh).astype(np.int64)
     n_comp = int(labels.max()) + 1 if len(labels) else 0
-    out = np.zeros((mesh.n_vertices, k), dtype=np.float32)
-    landmarks = np.zeros((n_comp, k), dtype=np.int64)
     # Vertices and faces grouped by component once (stable: each group keeps the mesh's order), so a
     # mesh of many parts costs O(N + F), not O((N + F) x parts).
     vertex_groups = label_groups(labels, n_comp)
     face_groups = label_groups(labels[mesh.faces[:, 0]], n_comp)
     local = np.empty(mesh.n_vertices, dtype=np.int64)  # index within the vertex's own component
+    parts = []
     for c in range(n_comp):
         idx = vertex_groups[c]
         local[idx] = np.arange(len(idx))
-        sub_faces = local[mesh.faces[face_groups[c]]]
-        rng = np.random.default_rng([seed, c])
-        if len(idx) < 3 or not len(sub_faces):
-            landmarks[c] = idx[0]
-            continue
-        n_fields = min(k, len(idx))
-        field = _heat_field(mesh.vertices[idx], sub_faces, t_coef, n_fields)
-        chosen, fields = farthest_point_fields(field, len(idx), n_fields, int(rng.integers(len(idx))))
-        cols = np.arange(k) % len(chosen)  # fewer vertices than K: repeat
-        out[idx] = fields[:, cols]
-        landmarks[c] = idx[np.asarray(chosen)[cols]]
-    return LandmarkFields(out, landmarks, labels)
+        parts.append((idx, local[mesh.faces[face_groups[c]]]))
+    solvers = {}
+
+    def fields(seed: int = 0) -> LandmarkFields:
+        out = np.zeros((mesh.n_vertices, k), dtype=np.float32)
+        landmarks = np.zeros((n_comp, k), dtype=np.int64)
+        for c, (idx, sub_faces) in enumerate(parts):
+            rng = np.random.default_rng([seed, c])
+            if len(idx) < 3 or not len(sub_faces):
+                landmarks[c] = idx[0]
+                continue
+            n_fields = min(k, len(idx))
+            if c not in solvers:
+                solvers[c] = _heat_field(mesh.vertices[idx], sub_faces, t_coef, n_fields)
+            chosen, sampled = farthest_point_fields(solvers[c], len(idx), n_fields, int(rng.integers(len(idx))))
+            cols = np.arange(k) % len(chosen)  # fewer vertices than K: repeat
+            out[idx] = sampled[:, cols]
+            landmarks[c] = idx[np.asarray(chosen)[cols]]
+        return LandmarkFields(out, landmarks, labels)
+    return fields
 
 
 def _heat_field(vertices, faces, t_coef: float, fields: int):

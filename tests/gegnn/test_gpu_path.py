@@ -173,7 +173,7 @@ def test_training_fills_the_landmark_cache_and_workers_only_read_it(tiny_store, 
     def no_compute(*args, **kwargs):
         raise AssertionError("a landmark field was computed, not read from the cache")
 
-    monkeypatch.setattr("gegnn.fields.landmark_fields", no_compute)
+    monkeypatch.setattr("gegnn.fields.landmark_solver", no_compute)
     for epoch in (-1, 0, 1, 2):
         for mesh_id in train_ids + [(-1, m) for m in val_ids]:
             if isinstance(mesh_id, tuple):  # validation meshes: seed 0 only

@@ -316,6 +316,20 @@ def test_heat_gradient_divergence_equals_scipy_products_bit_for_bit(monkeypatch)
         solver._divergence(u[:-1])
 
 
+@pytest.mark.parametrize("spec", [FieldSpec("landmark", 16), FieldSpec("landmark", 16, cloud=8),
+                                  FieldSpec("spectral", 8)], ids=["mesh", "cloud", "spectral"])
+def test_draws_set_up_once_equal_draws_made_one_by_one(spec):
+    """A fill computes a mesh's draws with one set-up of the heat method: the same bits as a fresh set-up
+    per draw, in any order (no draw leaves state behind for the next)."""
+    v, f = bumpy_sphere()
+    v = np.concatenate([v, v[:200] * 0.3 + [4.0, 0.0, 0.0]]) if spec.cloud else v  # a cloud of two parts
+    together = spec.compute_draws(v, f, [2, 0, 3])
+    for seed, fields in zip([2, 0, 3], together):
+        np.testing.assert_array_equal(fields, spec.compute(v, f, seed))
+    if spec.kind == "landmark":
+        assert not np.array_equal(together[0], together[1])  # the seed picks other landmarks
+
+
 def test_heat_refuses_non_manifold_edges_and_landmarks_fall_back_to_potpourri3d():
     v, f = bumpy_sphere()
     a, b = f[0, 0], f[0, 1]
