@@ -201,7 +201,10 @@ class GeGnn(nn.Module):
         their codes; its ``part`` labels the parts of its neighbour graph). ``device`` (default: where the
         model is) moves the model there, as ``model.to(device)`` would, and the embedding lives there.
         ``precision="bf16"`` runs the network under bf16 autocast: ~2x faster on CPUs with AVX512-BF16,
-        embeddings within ~1% (relative norm) of fp32.
+        embeddings within ~1% (relative norm) of fp32. With more than one torch thread
+        (``torch.set_num_threads``) the U-Net runs on a thread of its own while the fields are computed,
+        and a cloud's row-wise steps are spread over the threads (:mod:`gegnn.threads`); the result is the
+        same to the bit.
 
         Returns:
             :class:`gegnn.embedding.Embedding`
