@@ -665,9 +665,9 @@ def _query_cloud(model_spec, pretrained, cloud_path, source, output, suffix, exa
         import trimesh
         trimesh.PointCloud(points, colors=_field_colors(field, top)).export(output)
     elif suffix == ".png":
-        from .pointcloud import knn_edges, pca_normals
+        from .pointcloud import unoriented_normals
         from .render import Row, save_panels
-        lit = cloud.normals if cloud.normals is not None else pca_normals(points, knn_edges(points, 8)[1])
+        lit = cloud.normals if cloud.normals is not None else unoriented_normals(points)
         save_panels(output, [Row(points, None, source, _field_panels(field, exact_d, err, source, top), normals=lit)],
                     size=size, up=up, suptitle=f"{name}, point {source}")
     if output:

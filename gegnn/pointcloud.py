@@ -35,7 +35,7 @@ from . import threads
 from .landmarks import LandmarkFields, farthest_point_fields
 
 __all__ = ["CloudGraph", "cloud_graph", "mls_project", "surface_neighbors", "knn_edges", "graph_parts",
-           "pca_normals", "orient_normals", "cloud_landmark_fields", "cloud_landmark_solver", "KNN",
+           "pca_normals", "unoriented_normals", "orient_normals", "cloud_landmark_fields", "cloud_landmark_solver", "KNN",
            "CLOUD_T_COEF"]
 
 KNN = 8             # neighbours a point's graph edges and normal come from
@@ -124,6 +124,12 @@ def _mls_step(points: np.ndarray, hood: np.ndarray, dist: np.ndarray) -> np.ndar
 def pca_normals(points: np.ndarray, nbrs: np.ndarray) -> np.ndarray:
     """Unit normals (N, 3), unoriented: the least-variance direction of each point with its neighbours."""
     return threads.by_rows(lambda rows: _plane_normals(points[rows], points[nbrs[rows]]), len(points))
+
+
+def unoriented_normals(points: np.ndarray, k: int = KNN) -> np.ndarray:
+    """:func:`pca_normals` of every point with its k nearest: for light, where a normal's sign does not matter
+    (pictures of clouds without normals of their own)."""
+    return pca_normals(points, knn_edges(points, k)[1])
 
 
 def _plane_normals(centers: np.ndarray, near: np.ndarray) -> np.ndarray:

@@ -86,10 +86,9 @@ def view_page(emb, *, title: str, meta: str = "", sources=(0,), exact: dict | No
     u = np.asarray(UP_AXES[up])
     toward = default_view(vertices, faces, up).rotation[2]
     horizontal = toward - (toward @ u) * u
-    if cloud:
-        from .pointcloud import knn_edges, pca_normals
-        if normals is None:
-            normals = pca_normals(vertices, knn_edges(vertices, 8)[1])
+    if cloud and normals is None:
+        from .pointcloud import unoriented_normals
+        normals = unoriented_normals(vertices)
     data = {
         "vertices": _blob(vertices, "float32"),
         "faces": None if cloud else _blob(faces, "uint32"),
