@@ -45,8 +45,8 @@ length after the flips), as geometry-central's mesh method on the cover (no seco
     (L + 10^{-6} I)\,\phi = \nabla\!\cdot X, \qquad d = \phi - \phi_s .
 
 Identical cover triangles (same corners, bitwise equal lengths; a local triangle and its copies often
-appear six times) count once with their multiplicity; both systems are libigl Cholesky factors
-(:class:`gegnn.heat._Factor`).
+appear six times) count once with their multiplicity; both systems are factored and solved as on
+meshes (:class:`gegnn.heat.HeatSolver`).
 
 Measured against potpourri3d 1.4.0 (``benchmarks/bench_cloud_heat.py``; one core of a 2-core AMD EPYC
 shared with other work, medians): on the 19 validation clouds (~5,000 points) every normal (bitwise)

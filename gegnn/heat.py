@@ -36,7 +36,8 @@ the fields and are kept. No clamping: d can be slightly negative near the source
 
 Here the gradient and divergence are sparse matrices over the cover's distinct faces (a back copy that
 is still its front's mirror image is counted twice instead of computed again), both systems are
-libigl/Eigen sparse Cholesky factors, and the flips run in Python. 5,224-vertex closed mesh (2,164
+factored by Eigen's SimplicialLLT (AMD order) and solved by src/heat_ops.cpp, sixteen sources at a time,
+the blocks spread over torch's threads, and the flips run in Python. 5,224-vertex closed mesh (2,164
 cover flips), one core of a 2-core EPYC: setup ~55 ms (potpourri3d ~40 ms; the flips are half of it),
 a field ~0.65 ms (potpourri3d ~2 ms, 60% of it its per-face loop).
 
@@ -54,7 +55,6 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from geodata.biharmonic import ldlt
 
 __all__ = ["HeatSolver", "HeatDistance", "cover_problem", "MOLLIFY", "DELAUNAY_EPS", "POISSON_SHIFT"]
 
@@ -363,87 +363,53 @@ def _distinct_faces(cover: _Cover, h: np.ndarray, rtol: float = 1e-12) -> tuple[
     return keep, weight[keep]
 
 
-class _Factor:
-    """Sparse Cholesky of a symmetric positive definite matrix, reused for every solve: libigl's
-    (Eigen SimplicialLLT, AMD order; 2x faster than SuperLU here to factor and to solve one vector),
-    SuperLU in symmetric mode where Eigen refuses it."""
-
-    def __init__(self, matrix: sp.csc_matrix):
-        import igl
-
-        self._igl = igl.min_quad_with_fixed_data()
-        try:  # minimizes z'Az/2 + z'B: z = -A^-1 B
-            igl.min_quad_with_fixed_precompute(A=matrix, known=np.zeros(0, dtype=np.int64),
-                                               Aeq=sp.csc_matrix((0, matrix.shape[0])), pd=True, data=self._igl)
-            self._solve = igl.min_quad_with_fixed_solve
-        except RuntimeError:
-            self._lu = ldlt(matrix)
-            self._solve = None
-
-    def solve(self, rhs: np.ndarray) -> np.ndarray:
-        """A^-1 rhs for rhs (n,) or (n, k)."""
-        if self._solve is None:
-            return self._lu.solve(rhs)
-        b = -rhs.reshape(len(rhs), -1)
-        none = np.zeros((0, b.shape[1]))               # no fixed values (their count sets the columns)
-        return self._solve(self._igl, b, none, none).reshape(rhs.shape)
-
-
 class HeatSolver:
     """The heat method's two solves on operators built once (a subclass builds them): :math:`(M + tL)`,
-    :math:`(L + 10^{-6} I)` factored, the per-face gradient and divergence; then :meth:`distance` or
-    :meth:`distances` for any sources, CHUNK of them per solve.
+    :math:`(L + 10^{-6} I)` factored (Eigen's SimplicialLLT, AMD order), the per-face gradient and
+    divergence; then :meth:`distances` for any sources, in blocks of 16 spread over torch's threads
+    (:mod:`gegnn.threads`), or :meth:`distance` for one (src/heat_ops.cpp: without the interpreter; the
+    same fields for any thread count).
 
     Attributes:
         n: vertex count; t: the time step.
     """
 
-    CHUNK = 8  # columns per multi-source solve (keeps the per-face arrays in cache)
-
     def _factor(self, what: str, lap: sp.csc_matrix, mass: np.ndarray, grad, div) -> None:
-        """Factor (M + tL) and (L + shift I) of ``lap``, ``mass`` and ``self.t``; keep ``grad``, ``div``."""
+        """Factor (M + tL) and (L + shift I) of ``lap``, ``mass`` and ``self.t`` with ``grad`` and ``div``;
+        ValueError where a system is not numerically positive definite (degenerate input)."""
         if not (np.isfinite(lap.data).all() and np.isfinite(mass).all() and np.isfinite(self.t)):
             raise ValueError(f"{what}: non-finite operators (degenerate input)")
-        from ._heat_ops import GradientDivergence
+        from ._heat_ops import HeatFields
 
-        self._grad_div = GradientDivergence(*(np.ascontiguousarray(a, dtype=dt) for m in (grad.tocsr(), div.tocsr())
-                                              for a, dt in ((m.indptr, np.int64), (m.indices, np.int64),
-                                                            (m.data, np.float64))), n=self.n)
+        lap = lap.copy()
+        lap.sort_indices()
         diagonal = np.flatnonzero(lap.indices == np.repeat(np.arange(self.n), np.diff(lap.indptr)))
         heat, poisson = lap.copy(), lap                       # (M + tL), (L + shift I): same pattern
         heat.data *= self.t
         heat.data[diagonal] += mass
         poisson.data[diagonal] += POISSON_SHIFT
         try:
-            self._heat, self._poisson = _Factor(heat), _Factor(poisson)
+            self._fields = HeatFields(*(np.ascontiguousarray(a, dtype=dt) for m in (heat, poisson, grad.tocsr(), div.tocsr())
+                                        for a, dt in ((m.indptr, np.int64), (m.indices, np.int64), (m.data, np.float64))),
+                                      n=self.n)
         except RuntimeError as exc:
             raise ValueError(f"{what}: cannot factor ({exc})") from None
 
     def distances(self, sources) -> np.ndarray:
         """float64 (N, len(sources)): column j is the distance field of ``sources[j]`` alone."""
-        sources = np.atleast_1d(np.asarray(sources, dtype=np.int64))
-        out = np.empty((self.n, len(sources)))
-        for start in range(0, len(sources), self.CHUNK):
-            chunk = sources[start:start + self.CHUNK]
-            columns = np.arange(len(chunk))
-            rhs = np.zeros((self.n, len(chunk)))
-            rhs[chunk, columns] = 1.0
-            phi = self._poisson.solve(self._divergence(self._heat.solve(rhs)))
-            out[:, start:start + len(chunk)] = phi - phi[chunk, columns]
-        return out
+        from .threads import count
+
+        sources = np.ascontiguousarray(np.atleast_1d(np.asarray(sources, dtype=np.int64)))
+        return self._fields.distances(sources, count())
 
     def distance(self, source: int) -> np.ndarray:
-        """float64 (N,): the field of one source (as a column of :meth:`distances`, without its
-        per-column overhead)."""
-        rhs = np.zeros(self.n)
-        rhs[source] = 1.0
-        phi = self._poisson.solve(self._divergence(self._heat.solve(rhs))[:, 0])
-        return phi - phi[source]
+        """float64 (N,): the field of one source (a column of :meth:`distances`)."""
+        return self._fields.distances(np.array([source], dtype=np.int64), 1)[:, 0]
 
     def _divergence(self, u: np.ndarray) -> np.ndarray:
         """(N, k): the divergence of the normalized gradient of each column of u, (N,) or (N, k), per face
         grad u / |grad u| (0 where it is 0), as SciPy's products would give it (src/heat_ops.cpp)."""
-        return self._grad_div(np.ascontiguousarray(u.reshape(len(u), -1)))
+        return self._fields.divergence(np.ascontiguousarray(u.reshape(len(u), -1), dtype=np.float64))
 
 
 class HeatDistance(HeatSolver):

@@ -11,7 +11,9 @@ their geodesic distance:
 Landmarks are chosen by geodesic farthest-point sampling, which costs nothing beyond the fields
 themselves: each new landmark is the vertex farthest from all fields computed so far (the lowest index
 among vertices within TIE of the farthest, so that symmetric meshes, where solver rounding alone tells
-equally far vertices apart, give the same landmarks on every solver).
+equally far vertices apart, give the same landmarks on every solver). Point clouds choose them along
+their neighbour graph instead (:func:`graph_farthest_points`, shortest paths), so that all fields are
+then solved together, on all threads.
 
 The fields are potpourri3d's robust heat method, computed by :mod:`gegnn.heat` (the same fields to
 solver rounding, ~1e-14 relative; on the 19 validation meshes the same landmarks and float32 fields bit
@@ -33,7 +35,8 @@ from geodata.mesh import Mesh, label_groups, vertex_components
 
 from .heat import HeatDistance
 
-__all__ = ["LandmarkFields", "landmark_fields", "landmark_solver", "farthest_point_fields", "T_COEF"]
+__all__ = ["LandmarkFields", "landmark_fields", "landmark_solver", "farthest_point_fields", "graph_farthest_points",
+           "landmark_columns", "T_COEF"]
 
 T_COEF = 0.5
 TIE = 1e-9  # farthest-point ties: relative to the largest distance
@@ -154,6 +157,29 @@ def farthest_point_fields(field, n: int, k: int, first: int) -> tuple[list[int],
         if s + 1 < k:
             chosen.append(_farthest(nearest))
     return chosen, fields.T
+
+
+def graph_farthest_points(points: np.ndarray, neighbors: np.ndarray, k: int, first: int) -> np.ndarray:
+    """K farthest-point landmarks (int64 (K,), ``first`` first) by shortest paths along the graph joining
+    every point to its ``neighbors`` (N, m) both ways, edges as long as the segments: each next landmark
+    the point farthest from all before it (ties as in :func:`farthest_point_fields`; src/farthest_points.cpp).
+    Unlike :func:`farthest_point_fields` it needs no field to choose the next, so all K fields can then be
+    computed together (:meth:`gegnn.heat.HeatSolver.distances`)."""
+    from ._farthest_points import farthest_points
+
+    return farthest_points(np.ascontiguousarray(points, dtype=np.float64),
+                           np.ascontiguousarray(neighbors, dtype=np.int64), k, first, TIE)
+
+
+def landmark_columns(distances: np.ndarray, chosen: np.ndarray) -> np.ndarray:
+    """float32 (N, K) landmark fields from a solver's distances (N, K) of the landmarks ``chosen``: each
+    column's non-finite values replaced by its largest finite one, negatives by 0, the landmark's own 0."""
+    out = np.asarray(distances, dtype=np.float64)
+    if not np.isfinite(out.sum()):
+        out = np.stack([_finite(column) for column in out.T], axis=1)
+    out = np.maximum(out, 0.0).astype(np.float32)
+    out[np.asarray(chosen), np.arange(len(chosen))] = 0.0
+    return out
 
 
 def _farthest(nearest: np.ndarray) -> int:

@@ -274,16 +274,70 @@ def test_heat_fields_equal_potpourri3d_robust_fields(make):
     assert np.abs(ours - theirs).max() <= 1e-9 * np.abs(theirs).max()
 
 
-def test_heat_many_sources_per_solve_equal_one_at_a_time():
+def test_heat_fields_solved_together_on_threads_are_each_sources_own_and_the_systems_solutions(monkeypatch):
+    """src/heat_ops.cpp solves the sources in blocks of 16 (the rest in 8, 4, 2, 1) against the factors
+    in Eigen's order of operations: every column is bit for bit its source's field alone, on one thread
+    or two; and it solves the heat method's systems (SciPy's sparse LU on the same operators, 1e-10)."""
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as sla
+
+    import gegnn.heat as heat
+
+    kept = {}
+    factor = heat.HeatSolver._factor
+    monkeypatch.setattr(heat.HeatSolver, "_factor", lambda self, what, lap, mass, grad, div:
+                        kept.update(lap=lap.copy(), mass=mass) or factor(self, what, lap, mass, grad, div))
     v, f = open_bent_grid()
     solver = HeatDistance(v, f)
-    sources = np.array([3, 77, 150, 3])
-    many = solver.distances(sources)
-    assert many.shape == (len(v), 4)
+    sources = np.array([3, 77, 150, 3] + list(range(100, 133)))  # 37 = 16 + 16 + 4 + 1
+    before = torch.get_num_threads()
+    try:
+        torch.set_num_threads(1)
+        many = solver.distances(sources)
+        torch.set_num_threads(2)
+        np.testing.assert_array_equal(solver.distances(sources), many)
+    finally:
+        torch.set_num_threads(before)
+    assert many.shape == (len(v), len(sources))
     np.testing.assert_array_equal(many[:, 0], many[:, 3])
     for j, s in enumerate(sources):
-        one = solver.distance(s)
-        assert one[s] == 0 and np.abs(many[:, j] - one).max() <= 1e-12 * one.max()
+        np.testing.assert_array_equal(many[:, j], solver.distance(s))
+    lap, n = kept["lap"], len(v)
+    rhs = np.zeros((n, 3))
+    rhs[sources[:3], np.arange(3)] = 1.0
+    u = sla.splu((sp.diags(kept["mass"]) + solver.t * lap).tocsc()).solve(rhs)
+    phi = sla.splu((lap + heat.POISSON_SHIFT * sp.identity(n)).tocsc()).solve(solver._divergence(u))
+    expected = phi - phi[sources[:3], np.arange(3)]
+    assert np.abs(many[:, :3] - expected).max() <= 1e-10 * np.abs(expected).max()
+
+
+def test_graph_farthest_points_are_those_of_full_dijkstra_searches():
+    """Landmarks along a neighbour graph (src/farthest_points.cpp, each search pruned where it brings no
+    vertex closer) are those of SciPy's full Dijkstra search from every landmark with the same rule (the
+    lowest index within TIE of the farthest): on a regular grid, full of exact ties, and on two parts,
+    where the other part's lowest index comes second (infinitely far)."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import dijkstra
+
+    from gegnn.pointcloud import knn_edges
+
+    grid = np.stack(np.meshgrid(np.arange(12.0), np.arange(9.0), [0.0], indexing="ij"), -1).reshape(-1, 3)
+    apart = np.concatenate([grid, grid + [0.0, 50.0, 0.0]])
+    for points, first in ((grid, 40), (apart, 7)):
+        n = len(points)
+        neighbors = knn_edges(points, 6)[1]
+        rows = np.repeat(np.arange(n), neighbors.shape[1])
+        lengths = np.linalg.norm(points[rows] - points[neighbors.ravel()], axis=1)
+        graph = sp.csr_matrix((lengths, (rows, neighbors.ravel())), shape=(n, n))
+        nearest, expected = np.full(n, np.inf), [first]
+        for _ in range(30):
+            np.minimum(nearest, dijkstra(graph, directed=False, indices=expected[-1]), out=nearest)
+            far = np.isinf(nearest)
+            expected.append(int(np.argmax(far)) if far.any() else landmarks_module._farthest(nearest))
+        chosen = landmarks_module.graph_farthest_points(points, neighbors, 31, first)
+        np.testing.assert_array_equal(chosen, expected)
+        assert len(set(chosen.tolist())) == 31
+    assert chosen[1] == len(grid)  # the other part's lowest index
 
 
 def test_heat_gradient_divergence_equals_scipy_products_bit_for_bit(monkeypatch):

@@ -1,0 +1,96 @@
+// Farthest-point sampling on a weighted graph (gegnn/landmarks.py, graph_farthest_points): the first
+// vertex given, then again and again the vertex farthest, by shortest paths along the graph's edges,
+// from all chosen so far (the lowest index among those within a relative `tie` of the farthest, so that
+// rounding does not decide between equally far vertices).
+//
+// Each new vertex's Dijkstra search only enters vertices it brings closer, so the whole sampling costs
+// little more than one search from all sources at once (k = 128 at 8k points: ~3 ms).
+#include <nanobind/nanobind.h>
+#include <nanobind/ndarray.h>
+
+#include <cmath>
+#include <cstdint>
+#include <functional>
+#include <limits>
+#include <queue>
+#include <stdexcept>
+#include <utility>
+#include <vector>
+
+namespace nb = nanobind;
+
+namespace {
+
+using Points = nb::ndarray<const double, nb::ndim<2>, nb::c_contig, nb::device::cpu>;
+using Neighbors = nb::ndarray<const int64_t, nb::ndim<2>, nb::c_contig, nb::device::cpu>;
+
+nb::ndarray<nb::numpy, int64_t, nb::ndim<1>> farthest_points(const Points& points, const Neighbors& neighbors,
+                                                             int64_t k, int64_t first, double tie) {
+    const int64_t n = static_cast<int64_t>(points.shape(0)), m = static_cast<int64_t>(neighbors.shape(1));
+    const double* x = points.data();
+    const int64_t* nbr = neighbors.data();
+    if (points.shape(1) != 3 || static_cast<int64_t>(neighbors.shape(0)) != n)
+        throw std::invalid_argument("farthest_points: need points (N, 3) and neighbors (N, m)");
+    for (int64_t e = 0; e < n * m; ++e)
+        if (nbr[e] < 0 || nbr[e] >= n) throw std::out_of_range("farthest_points: neighbour index out of range");
+    if (k < 1 || k > n || first < 0 || first >= n) throw std::invalid_argument("farthest_points: need 1 <= k <= N");
+    auto* chosen = new int64_t[static_cast<size_t>(k)];
+    nb::capsule owner(chosen, [](void* q) noexcept { delete[] static_cast<int64_t*>(q); });
+    {
+        nb::gil_scoped_release released;
+        // The graph both ways (an edge listed by both ends twice: harmless), by a counting sort on the tail.
+        std::vector<int64_t> p(static_cast<size_t>(n + 1), 0), j(static_cast<size_t>(2 * n * m));
+        std::vector<double> w(j.size());
+        for (int64_t e = 0; e < n * m; ++e) {
+            ++p[e / m + 1];
+            ++p[nbr[e] + 1];
+        }
+        for (int64_t i = 0; i < n; ++i) p[i + 1] += p[i];
+        std::vector<int64_t> fill(p.begin(), p.end() - 1);
+        for (int64_t e = 0; e < n * m; ++e) {
+            const int64_t a = e / m, b = nbr[e];
+            const double dx = x[3 * a] - x[3 * b], dy = x[3 * a + 1] - x[3 * b + 1], dz = x[3 * a + 2] - x[3 * b + 2];
+            const double length = std::sqrt(dx * dx + dy * dy + dz * dz);
+            j[fill[a]] = b;
+            w[fill[a]++] = length;
+            j[fill[b]] = a;
+            w[fill[b]++] = length;
+        }
+        constexpr double inf = std::numeric_limits<double>::infinity();
+        std::vector<double> dist(static_cast<size_t>(n), inf);
+        using Entry = std::pair<double, int64_t>;
+        std::priority_queue<Entry, std::vector<Entry>, std::greater<Entry>> heap;
+        chosen[0] = first;
+        for (int64_t s = 0; s < k; ++s) {
+            dist[chosen[s]] = 0.0;
+            heap.emplace(0.0, chosen[s]);
+            while (!heap.empty()) {
+                const auto [d, u] = heap.top();
+                heap.pop();
+                if (d > dist[u]) continue;
+                for (int64_t e = p[u]; e < p[u + 1]; ++e) {
+                    const double nd = d + w[e];
+                    if (nd < dist[j[e]]) {
+                        dist[j[e]] = nd;
+                        heap.emplace(nd, j[e]);
+                    }
+                }
+            }
+            if (s + 1 == k) break;
+            double top = -1.0;
+            for (double d : dist) top = d > top ? d : top;
+            const double bar = std::isinf(top) ? inf : top - tie * top;
+            int64_t pick = 0;
+            while (dist[pick] < bar) ++pick;
+            chosen[s + 1] = pick;
+        }
+    }
+    return nb::ndarray<nb::numpy, int64_t, nb::ndim<1>>(chosen, {static_cast<size_t>(k)}, owner);
+}
+
+}  // namespace
+
+NB_MODULE(_farthest_points, module) {
+    module.def("farthest_points", &farthest_points, nb::arg("points"), nb::arg("neighbors"), nb::arg("k"),
+          nb::arg("first"), nb::arg("tie"));
+}
