@@ -5,12 +5,13 @@ of a mesh, on one torch thread and on several, alternated in one process, and wh
 
 bumpy_sphere clouds (``geodata.examples.bumpy_sphere``: its vertices); ``--mesh`` adds the landmark mesh model
 on the same meshes. Settings: each thread count (``torch.set_num_threads``: the k-d trees, the blocks of
-rows and the U-Net beside the landmark loop follow it, gegnn/threads.py) and, as the reference, the last
-thread count with every step on the caller's thread one after the other (``by_rows`` and ``beside`` run
-inline: the k-d trees alone on all threads, as before gegnn/threads.py). Each round embeds once per
-setting in turn, so slow spells of a shared machine fall on every setting alike; best and median over
-the rounds, and the median's ratio to the reference's. Then, on the last thread count, the wall-clock
-span of each step in one embed (steps overlap: the U-Net runs beside the farthest-point loop).
+rows, the U-Net beside the landmark fields and the fields' blocks of sources follow it, gegnn/threads.py)
+and, as the reference, the last thread count with every step on the caller's thread one after the other
+(``by_rows`` and ``beside`` run inline; the k-d trees and the fields' blocks still on all threads). Each
+round embeds once per setting in turn, so slow spells of a shared machine fall on every setting alike;
+best and median over the rounds, and the median's ratio to the reference's. Then, on the last thread
+count, the wall-clock span of each step in one embed (steps overlap: the U-Net runs beside the landmark
+fields).
 """
 from __future__ import annotations
 
@@ -24,6 +25,7 @@ import torch
 from bench_results import cpu_description  # benchmarks/ is on sys.path when a script there runs
 
 import gegnn.cloud_heat as cloud_heat
+import gegnn.heat as heat
 import gegnn.model
 import gegnn.pointcloud as pointcloud
 from geodata.examples import bumpy_sphere
@@ -34,7 +36,8 @@ STEPS = [(pointcloud, "mls_project", "projection"), (pointcloud, "knn_edges", "k
          (pointcloud, "surface_neighbors", "surface neighbours"),
          (pointcloud, "cloud_landmark_solver", "row-by-row set-up: surface neighbours, local triangulations"),
          (cloud_heat, "CloudHeatDistance", "cover, flips, operators, factorizations"),
-         (pointcloud, "farthest_point_fields", "128 landmark fields (farthest-point loop)")]
+         (pointcloud, "graph_farthest_points", "128 landmarks along the surface neighbours"),
+         (heat.HeatSolver, "distances", "their 128 fields, all together")]
 
 
 @contextmanager
@@ -70,7 +73,7 @@ def spans(model: GeGnn, points: np.ndarray) -> dict:
         saved.append((module, attr, getattr(module, attr)))
         setattr(module, attr, traced(getattr(module, attr), name))
     unet = model._unet
-    model._unet = traced(unet, "U-Net (beside the loop)")
+    model._unet = traced(unet, "U-Net (beside the fields)")
     try:
         t0 = time.perf_counter()
         model.embed(points)

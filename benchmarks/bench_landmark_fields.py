@@ -9,8 +9,10 @@ when it exists. A synthetic 5,000-vertex torus always runs. The reference (potpo
 
 Batched variant (not what landmark_fields does): rounds of B landmarks, the first of a round the exact
 farthest vertex, the others chosen greedily with the Euclidean distance to the round's earlier picks as a
-stand-in for their fields; then one B-column solve. It changes the landmarks, so its covering radius
-(max_i min_k d(i, l_k), from the fields) is compared with sequential farthest-point sampling's.
+stand-in for their fields; then one B-column solve. And landmarks chosen along the mesh's edges
+(``graph_farthest_points``, as point clouds choose theirs), then all fields in one call. Both change the
+landmarks, so their covering radius (max_i min_k d(i, l_k), from the fields) is compared with sequential
+farthest-point sampling's.
 """
 from __future__ import annotations
 
@@ -23,7 +25,8 @@ from bench_gegnn import timed  # benchmarks/ is on sys.path when a script there 
 from bench_results import cpu_description
 
 from gegnn.heat import HeatDistance
-from gegnn.landmarks import T_COEF, _farthest, farthest_point_fields, landmark_fields
+from gegnn.landmarks import (T_COEF, _farthest, farthest_point_fields, graph_farthest_points, landmark_columns,
+                             landmark_fields)
 
 DRAGON = "data/val.zarr/meshes/dragon-4af53808"
 
@@ -74,6 +77,15 @@ def batched_fps(v, f, k, first, batch):
     return chosen, np.concatenate(fields, axis=1)
 
 
+def graph_fps(v, f, k, first):
+    """Landmarks along the mesh's edges (what point clouds do along their neighbours), then all fields in one
+    call."""
+    solver = HeatDistance(v, f, T_COEF)
+    edges = np.unique(np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1), axis=0)
+    chosen = graph_farthest_points(v, edges, k, first)
+    return chosen.tolist(), landmark_columns(solver.distances(chosen), chosen)
+
+
 def covering_radius(fields) -> tuple[float, float]:
     """max_i min_k d(i, l_k) and its mean over vertices."""
     near = np.asarray(fields, dtype=np.float64).min(axis=1)
@@ -111,6 +123,11 @@ def bench_mesh(name, v, f, k, batches, repeat):
         rows.append((f"batched FPS, {b} landmarks a solve", b_s,
                      f"{ours_s / b_s:.2f}x vs sequential; covering radius {r:.4f} ({r / radius:.3f}x), "
                      f"mean {m:.4f} ({m / mean_near:.3f}x); {len(set(b_lm) & set(ours_lm))} landmarks shared"))
+    g_s, (g_lm, g_fields) = timed(lambda: graph_fps(v, f, k, first), repeat)
+    r, m = covering_radius(g_fields)
+    rows.append(("FPS along the edges, all fields in one call", g_s,
+                 f"{ours_s / g_s:.2f}x vs sequential; covering radius {r:.4f} ({r / radius:.3f}x), "
+                 f"mean {m:.4f} ({m / mean_near:.3f}x); {len(set(g_lm) & set(ours_lm))} landmarks shared"))
     width = max(len(r[0]) for r in rows)
     print(f"{'measurement':<{width}}  {'seconds':>9}  note")
     for label, seconds, note in rows:

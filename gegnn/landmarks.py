@@ -159,16 +159,16 @@ def farthest_point_fields(field, n: int, k: int, first: int) -> tuple[list[int],
     return chosen, fields.T
 
 
-def graph_farthest_points(points: np.ndarray, neighbors: np.ndarray, k: int, first: int) -> np.ndarray:
-    """K farthest-point landmarks (int64 (K,), ``first`` first) by shortest paths along the graph joining
-    every point to its ``neighbors`` (N, m) both ways, edges as long as the segments: each next landmark
-    the point farthest from all before it (ties as in :func:`farthest_point_fields`; src/farthest_points.cpp).
+def graph_farthest_points(points: np.ndarray, edges: np.ndarray, k: int, first: int) -> np.ndarray:
+    """K farthest-point landmarks (int64 (K,), ``first`` first) by shortest paths along the graph of
+    ``edges`` (E, 2) between the points (N, 3), each as long as its segment: each next landmark the point
+    farthest from all before it (ties as in :func:`farthest_point_fields`; src/farthest_points.cpp).
     Unlike :func:`farthest_point_fields` it needs no field to choose the next, so all K fields can then be
     computed together (:meth:`gegnn.heat.HeatSolver.distances`)."""
     from ._farthest_points import farthest_points
 
     return farthest_points(np.ascontiguousarray(points, dtype=np.float64),
-                           np.ascontiguousarray(neighbors, dtype=np.int64), k, first, TIE)
+                           np.ascontiguousarray(edges, dtype=np.int64).reshape(-1, 2), k, first, TIE)
 
 
 def landmark_columns(distances: np.ndarray, chosen: np.ndarray) -> np.ndarray:

@@ -236,10 +236,11 @@ def cloud_landmark_solver(points: np.ndarray, part: np.ndarray, t_coef: float = 
             if build is None:
                 landmarks[c] = idx[0]
                 continue
-            graph, make = build
+            neighbors, make = build
             if c not in solvers:
                 solvers[c] = make()
-            chosen = graph_farthest_points(points[idx], graph, min(k, len(idx)), int(rng.integers(len(idx))))
+            edges = np.stack([np.repeat(np.arange(len(idx)), neighbors.shape[1]), neighbors.ravel()], axis=1)
+            chosen = graph_farthest_points(points[idx], edges, min(k, len(idx)), int(rng.integers(len(idx))))
             sampled = landmark_columns(solvers[c](chosen), chosen)
             cols = np.arange(k) % len(chosen)
             out[idx] = sampled[:, cols]

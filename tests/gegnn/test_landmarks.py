@@ -334,7 +334,8 @@ def test_graph_farthest_points_are_those_of_full_dijkstra_searches():
             np.minimum(nearest, dijkstra(graph, directed=False, indices=expected[-1]), out=nearest)
             far = np.isinf(nearest)
             expected.append(int(np.argmax(far)) if far.any() else landmarks_module._farthest(nearest))
-        chosen = landmarks_module.graph_farthest_points(points, neighbors, 31, first)
+        edges = np.stack([rows, neighbors.ravel()], axis=1)
+        chosen = landmarks_module.graph_farthest_points(points, edges, 31, first)
         np.testing.assert_array_equal(chosen, expected)
         assert len(set(chosen.tolist())) == 31
     assert chosen[1] == len(grid)  # the other part's lowest index
