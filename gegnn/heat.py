@@ -38,8 +38,9 @@ Here the gradient and divergence are sparse matrices over the cover's distinct f
 is still its front's mirror image is counted twice instead of computed again), both systems are
 factored by Eigen's SimplicialLLT (AMD order) and solved by src/heat_ops.cpp, sixteen sources at a time,
 the blocks spread over torch's threads, and the flips run in Python. 5,224-vertex closed mesh (2,164
-cover flips), one core of a 2-core EPYC: setup ~55 ms (potpourri3d ~40 ms; the flips are half of it),
-a field ~0.65 ms (potpourri3d ~2 ms, 60% of it its per-face loop).
+cover flips), one core of a 2-core EPYC (2026-11-24, ``benchmarks/bench_landmark_fields.py``): setup
+49 ms (potpourri3d ~40 ms; the flips are half of it), a field 0.5 ms one at a time (potpourri3d ~2 ms,
+60% of it its per-face loop).
 
 Supported: edge-manifold meshes (at most two faces an edge; any orientation, boundaries, slivers, zero
 lengths) with finite coordinates and no face repeating a vertex. :func:`cover_problem` says why not

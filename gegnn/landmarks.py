@@ -20,9 +20,12 @@ solver rounding, ~1e-14 relative; on the 19 validation meshes the same landmarks
 for bit) on parts of at least HEAT_MIN_VERTICES vertices when at least HEAT_MIN_FIELDS fields are
 asked for, by potpourri3d's solver elsewhere (there its smaller setup wins). Sampling is sequential
 (field k picks landmark k + 1): one heat solve, gradient, divergence and Poisson solve a field. K = 128
-on the 5,224-vertex validation dragon, one core of a 2-core EPYC: 0.15-0.19 s (setup ~0.05 s, a field
-~0.65-0.9 ms), against 0.27-0.34 s (2.1-2.7 ms a field) with potpourri3d's solver in the same runs
-(benchmarks/bench_landmark_fields.py).
+on the 5,224-vertex validation dragon, one core of a 2-core EPYC: 0.12 s (setup 0.05 s, a field 0.5
+ms), against 0.26 s (2.0 ms a field) with potpourri3d's solver in the same run, the same landmarks and
+float32 fields (benchmarks/bench_landmark_fields.py, 2026-11-24). Landmarks along the mesh's edges
+instead, with all fields in one call, would take 0.11 s on one core and cover the mesh less evenly
+(covering radius 1.12x): meshes keep the sequential choice, which the shipped models were trained and
+measured with.
 """
 from __future__ import annotations
 

@@ -7,7 +7,9 @@ r"""Point clouds as GeGnn inputs: the graph, the normals and the landmark fields
   nothing on clean clouds: on the 19 validation clouds the heat method's mean relative error falls from
   9.07% to 5.12% with noise of 0.5% of the bounding box and from 4.63% to 4.22% without.
 * **Graph**: the k nearest neighbours of every point, symmetrized (an edge where either point is among
-  the other's k nearest).
+  the other's k nearest); with a scan's own oriented normals, the k nearest facing the same side (validation
+  clouds with the meshes' normals: 3.07% -> 3.02%, the lion 19.5% -> 19.1% and the teapot 10.4% -> 9.7%,
+  the other 17 unchanged at 1.67%).
 * **Normals**: the direction of least variance of each point's neighbourhood (PCA), oriented
   consistently by propagation along a minimum spanning tree of the graph weighted by
   :math:`1 - |n_i \cdot n_j|` (Hoppe et al. 1992), each part's tree rooted at its point farthest
@@ -71,13 +73,20 @@ class CloudGraph:
         return orient_normals(self.points, pca_normals(self.points, self.neighbors), self.edges)[0]
 
 
-def knn_edges(points: np.ndarray, k: int = KNN) -> tuple[np.ndarray, np.ndarray]:
+def knn_edges(points: np.ndarray, k: int = KNN, normals: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Undirected edges (E, 2) of the symmetrized k-nearest-neighbour graph (i < j), and the neighbours
-    (N, k) of every point, nearest first. Needs more than k distinct points."""
+    (N, k) of every point, nearest first. With the cloud's own oriented ``normals`` (a scan's), each
+    point's k nearest among its 4k nearest that face its side, :math:`n_q \cdot n_p > 0` (the two sides of
+    a thin wall face away from each other), rows with fewer filled with the nearest others. Needs more
+    than k distinct points."""
     from scipy.spatial import cKDTree
 
-    _, nbrs = cKDTree(points).query(points, k + 1, workers=threads.count())
+    candidates = k if normals is None else min(4 * k, len(points) - 1)
+    _, nbrs = cKDTree(points).query(points, candidates + 1, workers=threads.count())
     nbrs = nbrs[:, 1:]
+    if normals is not None:
+        away = np.einsum("nkd,nd->nk", normals[nbrs], normals) <= 0
+        nbrs = np.take_along_axis(nbrs, np.argsort(away, axis=1, kind="stable")[:, :k], axis=1)
     i = np.repeat(np.arange(len(points)), k)
     j = nbrs.ravel()
     key = np.unique(np.minimum(i, j) * len(points) + np.maximum(i, j))
@@ -192,7 +201,7 @@ def cloud_graph(points: np.ndarray, k: int = KNN, normals: np.ndarray | None = N
     """The graph of a point cloud of distinct points, made of the points projected by :func:`mls_project`
     (see the module); ``normals``: given ones (used as they are, unit length) instead of estimated."""
     points = mls_project(points)
-    edges, nbrs = knn_edges(points, k)
+    edges, nbrs = knn_edges(points, k, normals)
     return CloudGraph(points, edges, graph_parts(len(points), edges), nbrs, normals)
 
 

@@ -66,6 +66,11 @@ def test_a_scans_own_normals_keep_the_two_sides_of_a_thin_wall_apart():
     inner = np.flatnonzero((np.abs(p[:, :2] - 1.0) < 0.7).all(axis=1))
     assert (side[surface_neighbors(p, 15)[inner]] != side[inner, None]).any(axis=1).all()  # the cone alone: no
     assert not (side[surface_neighbors(p, 15, normals=normals)[inner]] != side[inner, None]).any()
+    assert (side[knn_edges(p, 8)[1][inner]] != side[inner, None]).any(axis=1).all()  # nor the plain graph
+    edges, nbrs = knn_edges(p, 8, normals)
+    assert not (side[edges[:, 0]] != side[edges[:, 1]]).any()
+    front = inner[inner < 1600]  # its own side's nearest
+    np.testing.assert_array_equal(np.sort(nbrs[front], axis=1), np.sort(knn_edges(sheet, 8)[1][front], axis=1))
 
 
 def test_normals_are_radial_and_outward_on_each_of_two_spheres():
