@@ -56,7 +56,6 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-
 __all__ = ["HeatSolver", "HeatDistance", "cover_problem", "MOLLIFY", "DELAUNAY_EPS", "POISSON_SHIFT"]
 
 MOLLIFY = 1e-5          # mollification margin, relative to the mean cover edge length
@@ -390,9 +389,9 @@ class HeatSolver:
         heat.data[diagonal] += mass
         poisson.data[diagonal] += POISSON_SHIFT
         try:
-            self._fields = HeatFields(*(np.ascontiguousarray(a, dtype=dt) for m in (heat, poisson, grad.tocsr(), div.tocsr())
-                                        for a, dt in ((m.indptr, np.int64), (m.indices, np.int64), (m.data, np.float64))),
-                                      n=self.n)
+            arrays = [np.ascontiguousarray(a, dtype=dt) for m in (heat, poisson, grad.tocsr(), div.tocsr())
+                      for a, dt in ((m.indptr, np.int64), (m.indices, np.int64), (m.data, np.float64))]
+            self._fields = HeatFields(*arrays, n=self.n)
         except RuntimeError as exc:
             raise ValueError(f"{what}: cannot factor ({exc})") from None
 

@@ -1,10 +1,12 @@
 // Farthest-point sampling on a graph of points joined by straight edges (gegnn/landmarks.py,
-// graph_farthest_points): the first vertex given, then again and again the vertex farthest, by shortest paths along the graph's edges,
-// from all chosen so far (the lowest index among those within a relative `tie` of the farthest, so that
-// rounding does not decide between equally far vertices).
+// graph_farthest_points): the first vertex given, then again and again the vertex farthest, by shortest
+// paths along the edges, from all chosen so far (the lowest index among those within a relative `tie` of
+// the farthest, so that rounding does not decide between equally far vertices; unreached vertices are
+// the farthest of all).
 //
 // Each new vertex's Dijkstra search only enters vertices it brings closer, so the whole sampling costs
-// little more than one search from all sources at once (k = 128 at 8k points: ~3 ms).
+// a few searches over the whole graph (128 landmarks at 8k points, 15 neighbours each: ~7 ms, ~11 ms with
+// the graph's assembly).
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>
 
