@@ -42,18 +42,20 @@ STEPS = [(pointcloud, "mls_project", "projection"), (pointcloud, "knn_edges", "k
 
 @contextmanager
 def one_after_the_other():
-    """The reference: blocks of rows as one block, the task beside as a call in line."""
+    """The reference: blocks of rows as one block, the task beside as a call in line (torch's kernels on
+    all threads)."""
     def inline(compute):
         done = Future()
         done.set_result(compute())
         return done
 
-    saved = threads.by_rows, gegnn.model.beside
-    threads.by_rows, gegnn.model.beside = (lambda compute, n: compute(slice(0, n))), inline
+    saved = threads.by_rows, gegnn.model.beside, gegnn.model.fewer_for_torch
+    threads.by_rows, gegnn.model.beside, gegnn.model.fewer_for_torch = (
+        (lambda compute, n: compute(slice(0, n))), inline, nullcontext)
     try:
         yield
     finally:
-        threads.by_rows, gegnn.model.beside = saved
+        threads.by_rows, gegnn.model.beside, gegnn.model.fewer_for_torch = saved
 
 
 def spans(model: GeGnn, points: np.ndarray) -> dict:

@@ -20,7 +20,7 @@ from .decoders import DistanceDecoder, LandmarkDecoder, SpectralDecoder
 from .fields import FieldSpec
 from .graph import Graph, directed_edges
 from .nn import GeoConv, GeoPool, GeoUnpool, Hierarchy, ResBlocks, build_hierarchy
-from .threads import beside
+from .threads import beside, fewer_for_torch
 
 __all__ = ["GeGnnConfig", "GeGnn", "DistanceDecoder", "LandmarkDecoder", "SpectralDecoder"]
 
@@ -236,9 +236,10 @@ class GeGnn(nn.Module):
             with autocast(), torch.inference_mode():
                 return h, self._unet(h)
 
-        trunk = beside(unet)  # on another core while the fields are computed here: read only by the codes
-        fields = fields()
-        h, trunk = trunk.result()
+        with fewer_for_torch():  # the network's kernels leave the fields a core
+            trunk = beside(unet)  # on another core while the fields are computed here: read only by the codes
+            fields = fields()
+            h, trunk = trunk.result()
         with autocast(), torch.inference_mode():
             codes = self.codes(trunk, h, fields).float()
         self.train(was_training)

@@ -52,6 +52,21 @@ def test_beside_runs_on_another_thread_only_with_several(torch_threads):
             threads.beside(fail).result()
 
 
+def test_fewer_for_torch_leaves_our_work_its_threads_and_restores_torchs(torch_threads):
+    for n in (1, 2, 3):
+        torch_threads(n)
+        with threads.fewer_for_torch():
+            assert torch.get_num_threads() == max(1, n - 1) and threads.count() == n
+            with threads.fewer_for_torch():  # nested: no fewer again
+                assert torch.get_num_threads() == max(1, n - 1) and threads.count() == n
+            assert threads.beside(threads.count).result() == n
+        assert torch.get_num_threads() == n and threads.count() == n
+    with pytest.raises(ValueError, match="inside"):
+        with threads.fewer_for_torch():
+            raise ValueError("inside")
+    assert torch.get_num_threads() == 3 and threads.count() == 3
+
+
 @pytest.mark.parametrize("name", ["points", "landmark"])
 def test_embed_is_the_same_on_one_and_two_threads(name, torch_threads):
     """The cloud model's projection, normals, surface neighbours, local triangulations (cut into blocks of
