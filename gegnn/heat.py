@@ -56,6 +56,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from . import threads
+
 __all__ = ["HeatSolver", "HeatDistance", "cover_problem", "MOLLIFY", "DELAUNAY_EPS", "POISSON_SHIFT"]
 
 MOLLIFY = 1e-5          # mollification margin, relative to the mean cover edge length
@@ -397,10 +399,8 @@ class HeatSolver:
 
     def distances(self, sources) -> np.ndarray:
         """float64 (N, len(sources)): column j is the distance field of ``sources[j]`` alone."""
-        from .threads import count
-
         sources = np.ascontiguousarray(np.atleast_1d(np.asarray(sources, dtype=np.int64)))
-        return self._fields.distances(sources, count())
+        return self._fields.distances(sources, threads.count())
 
     def distance(self, source: int) -> np.ndarray:
         """float64 (N,): the field of one source (a column of :meth:`distances`)."""

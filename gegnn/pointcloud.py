@@ -245,10 +245,9 @@ def cloud_landmark_solver(points: np.ndarray, part: np.ndarray, t_coef: float = 
             if build is None:
                 landmarks[c] = idx[0]
                 continue
-            neighbors, make = build
+            edges, make = build
             if c not in solvers:
                 solvers[c] = make()
-            edges = np.stack([np.repeat(np.arange(len(idx)), neighbors.shape[1]), neighbors.ravel()], axis=1)
             chosen = graph_farthest_points(points[idx], edges, min(k, len(idx)), int(rng.integers(len(idx))))
             sampled = landmark_columns(solvers[c](chosen), chosen)
             cols = np.arange(k) % len(chosen)
@@ -316,10 +315,10 @@ def _cone_neighbors(centers, near, nbrs, k: int, cone_deg: float, normals) -> tu
 def _cloud_field(points: np.ndarray, t_coef: float, normals: np.ndarray | None = None):
     """The point-cloud heat method on one part, in two steps: its :func:`surface_neighbors` (potpourri3d's
     30 nearest where those would split the part) and local triangulations now, row by row on torch's
-    threads; then the neighbours (N, m), for the landmarks' graph, and a function building
-    ``distances(sources) -> (N, len(sources))`` from them (:class:`gegnn.cloud_heat.CloudHeatDistance`'s
-    cover, flips and factorizations, on one thread), or from potpourri3d itself on clouds that the method
-    refuses (a degenerate neighbourhood)."""
+    threads; then the edges (E, 2) of the landmarks' graph (each point to those neighbours), and a
+    function building ``distances(sources) -> (N, len(sources))`` from them
+    (:class:`gegnn.cloud_heat.CloudHeatDistance`'s cover, flips and factorizations, on one thread), or
+    from potpourri3d itself on clouds that the method refuses (a degenerate neighbourhood)."""
     from .cloud_heat import CloudHeatDistance, local_triangulations
 
     points = np.ascontiguousarray(points, dtype=np.float64)
@@ -341,4 +340,4 @@ def _cloud_field(points: np.ndarray, t_coef: float, normals: np.ndarray | None =
         import potpourri3d as pp3d
         solver = pp3d.PointCloudHeatSolver(points, t_coef=t_coef)
         return lambda sources: np.stack([solver.compute_distance(int(s)) for s in sources], axis=1)
-    return (knn_edges(points, HEAT_K)[1] if neighbors is None else neighbors), build
+    return (knn_edges(points, HEAT_K)[0] if neighbors is None else pairs), build
