@@ -24,6 +24,7 @@ import trimesh
 from bench_gegnn import timed  # benchmarks/ is on sys.path when a script there runs
 from bench_results import cpu_description
 
+from geodata.mesh import unique_edges
 from gegnn.heat import HeatDistance
 from gegnn.landmarks import (T_COEF, _farthest, farthest_point_fields, graph_farthest_points, landmark_columns,
                              landmark_fields)
@@ -81,8 +82,7 @@ def graph_fps(v, f, k, first):
     """Landmarks along the mesh's edges (what point clouds do along their neighbours), then all fields in one
     call."""
     solver = HeatDistance(v, f, T_COEF)
-    edges = np.unique(np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1), axis=0)
-    chosen = graph_farthest_points(v, edges, k, first)
+    chosen = graph_farthest_points(v, unique_edges(f), k, first)
     return chosen.tolist(), landmark_columns(solver.distances(chosen), chosen)
 
 
