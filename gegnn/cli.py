@@ -229,9 +229,12 @@ def query(files, pretrained, source, pairs_csv, points_file, output, exact, clou
       gegnn query --pretrained biharmonic bunny.obj --source 0 --exact -o compare.png
       gegnn query runs/a/best.safetensors bunny.obj --pairs pairs.csv -o distances.csv
       gegnn query --pretrained bunny.obj --points clicks.csv --exact -o distances.npy
+      gegnn query --pretrained points scan.xyz --pairs pairs.csv -o distances.csv
 
     Distances are in the mesh's units. The PLY and PNG show the mesh the network ran on (with
-    --prepare, the remeshed one); .npy and CSV outputs use the file's vertex numbering.
+    --prepare, the remeshed one); .npy and CSV outputs use the file's vertex numbering. A point-cloud
+    model (--pretrained points) reads a cloud (.xyz .txt .pts .csv .npy .ply) instead of MESH and answers
+    --source or --pairs in the file's point numbering.
     """
     import numpy as np
 
@@ -241,8 +244,14 @@ def query(files, pretrained, source, pairs_csv, points_file, output, exact, clou
 
     model_spec, (mesh_path,) = _model_and_meshes(files, pretrained)
     if _model_config(model_spec, pretrained).points:
-        if source is None or pairs_csv or points_file or path_to is not None or prepare:
-            raise click.UsageError("a point-cloud model answers --source I (with --exact --mesh MESH to compare)")
+        if (source is None) == (pairs_csv is None) or points_file or path_to is not None or prepare:
+            raise click.UsageError("a point-cloud model answers --source I (with --exact --mesh MESH to compare) "
+                                   "or --pairs FILE")
+        if exact and pairs_csv:
+            raise click.UsageError("--exact goes with --source (it compares whole fields)")
+        if pairs_csv:
+            return _query_cloud_pairs(model_spec, pretrained, mesh_path, pairs_csv, output,
+                                      _output_suffix(output, (".csv",)), device, precision)
         return _query_cloud(model_spec, pretrained, mesh_path, source, output,
                             _output_suffix(output, (".npy", ".ply", ".png")), exact, cloud_mesh, device, precision,
                             up, size)
@@ -277,14 +286,7 @@ def query(files, pretrained, source, pairs_csv, points_file, output, exact, clou
 
     emb = _load_model(model_spec, pretrained, device).embed(qm.mesh.vertices, qm.mesh.faces, precision=precision)
     if pairs_csv:
-        d = emb.distance(net_pairs[:, 0], net_pairs[:, 1])
-        lines = ["i,j,distance"] + [f"{i},{j},{x:.6g}" for (i, j), x in zip(pairs.tolist(), d.tolist())]
-        if output:
-            Path(output).write_text("\n".join(lines) + "\n")
-            click.echo(f"{len(pairs)} distances written to {output}")
-        else:
-            click.echo("\n".join(lines))
-        return
+        return _write_pairs(pairs, emb.distance(net_pairs[:, 0], net_pairs[:, 1]), output)
 
     from .query import resolution_note, source_part
 
@@ -589,9 +591,9 @@ def _view_cloud(model_spec, pretrained, cloud_path, sources, exact, mesh_path, o
                "browser")
 
 
-def _load_cloud(cloud_path, sources):
+def _load_cloud(cloud_path, sources, err: bool = False):
     """A cloud file and its points that are not far outliers (sorted indices), after checking that every
-    source is one of them; its notes and the outliers' count echoed."""
+    source is one of them; its notes and the outliers' count echoed (to stderr with ``err``)."""
     import numpy as np
 
     from geodata.mesh import MeshError
@@ -604,7 +606,7 @@ def _load_cloud(cloud_path, sources):
         raise click.ClickException(f"{cloud_path}: {exc.reason}") from None
     n = len(cloud.points)
     for note in cloud.notes:
-        click.echo(f"{name}: note: {note}")
+        click.echo(f"{name}: note: {note}", err=err)
     far = outliers(cloud.points)
     for source in sources:
         if not 0 <= source < n:
@@ -614,8 +616,55 @@ def _load_cloud(cloud_path, sources):
                                        "no distances from it")
     if len(far):
         click.echo(f"{name}: note: {len(far)} points far from all others (the first: point {far[0]}) are left out "
-                   "(NaN)")
+                   "(NaN)", err=err)
     return cloud, np.setdiff1d(np.arange(n), far)
+
+
+def _write_pairs(pairs, distances, output) -> None:
+    """A CSV i,j,distance of the pairs in the file's numbering, to ``output`` or stdout."""
+    lines = ["i,j,distance"] + [f"{i},{j},{x:.6g}" for (i, j), x in zip(pairs.tolist(), distances.tolist())]
+    if output:
+        Path(output).write_text("\n".join(lines) + "\n")
+        click.echo(f"{len(pairs)} distances written to {output}")
+    else:
+        click.echo("\n".join(lines))
+
+
+def _query_cloud_pairs(model_spec, pretrained, cloud_path, pairs_csv, output, suffix, device, precision):
+    """``gegnn query --pairs`` with a point-cloud model: the distance of every pair of the file's points, NaN
+    where a point is a far outlier or the two lie on different parts of the neighbour graph."""
+    import numpy as np
+
+    from .query import read_pairs
+
+    name = Path(cloud_path).name
+    try:
+        pairs = read_pairs(pairs_csv)
+    except ValueError as exc:
+        raise click.ClickException(str(exc)) from None
+    cloud, keep = _load_cloud(cloud_path, [], err=output is None)  # notes apart from a CSV on stdout
+    n = len(cloud.points)
+    bad = (pairs < 0) | (pairs >= n)
+    if bad.any():
+        row = int(np.flatnonzero(bad.any(axis=1))[0])
+        raise click.ClickException(f"{pairs_csv}: pair {row + 1}: point {pairs[bad][0]} out of range: {name} has "
+                                   f"{n} points")
+    model = _load_model(model_spec, pretrained, device, clouds=True)
+    normals = None if cloud.normals is None else cloud.normals[keep]
+    try:
+        emb = model.embed(cloud.points[keep], normals=normals, precision=precision)
+    except ValueError as exc:
+        raise click.ClickException(f"{cloud_path}: {exc}") from None
+    local = np.searchsorted(keep, pairs)
+    kept = (local < len(keep)) & (keep[np.minimum(local, len(keep) - 1)] == pairs)
+    local = np.where(kept, local, 0)
+    d = emb.distance(local[:, 0], local[:, 1])
+    same = kept.all(axis=1) & (emb.part[local[:, 0]] == emb.part[local[:, 1]])
+    d = np.where(same, d, np.nan)
+    if not same.all():
+        click.echo(f"{name}: note: {int((~same).sum())} pairs have no distance (NaN): a point far from all others, "
+                   "or the two on different parts of the neighbour graph", err=output is None)
+    _write_pairs(pairs, d, output)
 
 
 def _query_cloud(model_spec, pretrained, cloud_path, source, output, suffix, exact, mesh_path, device, precision,

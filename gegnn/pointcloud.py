@@ -74,7 +74,7 @@ class CloudGraph:
 
 
 def knn_edges(points: np.ndarray, k: int = KNN, normals: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Undirected edges (E, 2) of the symmetrized k-nearest-neighbour graph (i < j), and the neighbours
+    r"""Undirected edges (E, 2) of the symmetrized k-nearest-neighbour graph (i < j), and the neighbours
     (N, k) of every point, nearest first. With the cloud's own oriented ``normals`` (a scan's), each
     point's k nearest among its 4k nearest that face its side, :math:`n_q \cdot n_p > 0` (the two sides of
     a thin wall face away from each other), rows with fewer filled with the nearest others. Needs more

@@ -305,3 +305,38 @@ def test_surface_neighbours_from_2k_candidates_then_6k_where_needed_equal_those_
 
         assert (among(30) != among(90)).any()  # the 2k nearest alone would not do
         np.testing.assert_array_equal(surface_neighbors(p, 15, normals=given), among(90))
+
+
+def test_query_pairs_of_a_cloud_in_file_numbering(cloud_model, tmp_path):
+    """gegnn query --pairs with a point-cloud model: each pair's distance is the embedding's, in the file's
+    numbering; NaN where a point is a far outlier or the two lie on different parts; a point out of range
+    is named."""
+    from click.testing import CliRunner
+
+    from gegnn.cli import main
+
+    a, b = fibonacci_sphere(400), fibonacci_sphere(300, center=(6.0, 0, 0))
+    cloud = np.concatenate([a, [[40.0, 0, 0]], b])  # point 400: an outlier
+    np.savetxt(tmp_path / "cloud.xyz", cloud)
+    cloud_model.save(tmp_path / "cloud.safetensors")
+    pairs = np.array([[0, 7], [3, 399], [401, 650], [5, 400], [2, 450], [7, 7]])
+    np.savetxt(tmp_path / "pairs.csv", pairs, fmt="%d", delimiter=",", header="i,j", comments="")
+    result = CliRunner().invoke(main, ["query", str(tmp_path / "cloud.safetensors"), str(tmp_path / "cloud.xyz"),
+                                       "--pairs", str(tmp_path / "pairs.csv"), "-o", str(tmp_path / "d.csv")])
+    assert result.exit_code == 0, result.output
+    assert "2 pairs have no distance" in result.output
+    got = np.loadtxt(tmp_path / "d.csv", delimiter=",", skiprows=1)
+    np.testing.assert_array_equal(got[:, :2], pairs)
+    kept = np.delete(np.arange(len(cloud)), 400)
+    emb = cloud_model.embed(cloud[kept])
+    local = np.searchsorted(kept, pairs[[0, 1, 2, 5]])
+    np.testing.assert_allclose(got[[0, 1, 2, 5], 2], emb.distance(local[:, 0], local[:, 1]), rtol=1e-5)
+    assert np.isnan(got[[3, 4], 2]).all() and got[5, 2] == 0 and (got[:3, 2] > 0).all()
+
+    np.savetxt(tmp_path / "bad.csv", [[0, 701]], fmt="%d", delimiter=",")
+    result = CliRunner().invoke(main, ["query", str(tmp_path / "cloud.safetensors"), str(tmp_path / "cloud.xyz"),
+                                       "--pairs", str(tmp_path / "bad.csv")])
+    assert result.exit_code != 0 and "pair 1: point 701 out of range: cloud.xyz has 701 points" in result.output
+    result = CliRunner().invoke(main, ["query", str(tmp_path / "cloud.safetensors"), str(tmp_path / "cloud.xyz"),
+                                       "--pairs", str(tmp_path / "pairs.csv"), "--exact"])
+    assert result.exit_code != 0 and "--exact goes with --source" in result.output
