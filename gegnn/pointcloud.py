@@ -103,54 +103,36 @@ def mls_project(points: np.ndarray, k: int = MLS_K) -> np.ndarray:
     :math:`z = c_0 + c_1 u + c_2 v + c_3 u^2 + c_4 uv + c_5 v^2` is fitted by weighted least squares and
     :math:`p' = p + c_0\,n`. A point whose fit would move it by more than half its neighbourhood's radius
     :math:`d_k` (too few or degenerate neighbours) stays where it is. Needs more than k distinct points
-    (fewer: all of them are used)."""
+    (fewer: all of them are used). Compiled (``src/cloud_ops.cpp``), in blocks of rows on torch's threads."""
     from scipy.spatial import cKDTree
 
-    points = np.asarray(points, dtype=np.float64)
+    from ._cloud_ops import mls_project as project
+
+    points = np.ascontiguousarray(points, dtype=np.float64)
     k = min(k, len(points) - 1)
     dist, nbrs = cKDTree(points).query(points, k + 1, workers=threads.count())
-    return threads.by_rows(lambda rows: _mls_step(points[rows], points[nbrs[rows]], dist[rows]), len(points))
+    nbrs = nbrs.astype(np.int64, copy=False)
+    return threads.by_rows(lambda rows: project(points, _indices(rows), nbrs[rows], dist[rows]), len(points))
 
 
-def _mls_step(points: np.ndarray, hood: np.ndarray, dist: np.ndarray) -> np.ndarray:
-    """:func:`mls_project` of ``points`` (N, 3) with their neighbourhoods ``hood`` (N, k + 1, 3), the point
-    itself first, at distances ``dist`` (N, k + 1)."""
-    radius = np.maximum(dist[:, -1:], 1e-300)
-    w = np.exp(-(2.0 * dist / radius) ** 2)
-    centroid = (w[..., None] * hood).sum(1) / w.sum(1, keepdims=True)
-    spread = (hood - centroid[:, None]) * np.sqrt(w)[..., None]
-    _, frame = np.linalg.eigh(spread.transpose(0, 2, 1) @ spread)
-    rel = hood - points[:, None]
-    z, v, u = np.moveaxis(rel @ frame, 2, 0)
-    sw = np.sqrt(w)
-    a = np.empty(u.shape + (6,))  # columns of comparable size: the normal equations stay well conditioned
-    a[..., 0] = sw
-    for col, (monomial, scale) in enumerate(((u, radius), (v, radius), (u * u, radius ** 2),
-                                             (u * v, radius ** 2), (v * v, radius ** 2)), start=1):
-        np.divide(np.multiply(monomial, sw, out=a[..., col]), scale, out=a[..., col])
-    normal_eq = a.transpose(0, 2, 1) @ a + 1e-10 * np.eye(6)
-    c0 = np.linalg.solve(normal_eq, a.transpose(0, 2, 1) @ (z * sw)[..., None])[:, 0, 0]
-    c0 = np.where(np.abs(c0) <= 0.5 * radius[:, 0], c0, 0.0)
-    return points + c0[:, None] * frame[:, :, 0]
+def _indices(rows: slice) -> np.ndarray:
+    return np.arange(rows.start, rows.stop, dtype=np.int64)
 
 
 def pca_normals(points: np.ndarray, nbrs: np.ndarray) -> np.ndarray:
-    """Unit normals (N, 3), unoriented: the least-variance direction of each point with its neighbours."""
-    return threads.by_rows(lambda rows: _plane_normals(points[rows], points[nbrs[rows]]), len(points))
+    """Unit normals (N, 3), unoriented: the least-variance direction of each point with its neighbours (N, k)
+    (about their mean; ``src/cloud_ops.cpp``)."""
+    from ._cloud_ops import plane_normals
+
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    nbrs = np.ascontiguousarray(nbrs, dtype=np.int64)
+    return threads.by_rows(lambda rows: plane_normals(points, _indices(rows), nbrs[rows]), len(points))
 
 
 def unoriented_normals(points: np.ndarray, k: int = KNN) -> np.ndarray:
     """:func:`pca_normals` of every point with its k nearest: for light, where a normal's sign does not matter
     (pictures of clouds without normals of their own)."""
     return pca_normals(points, knn_edges(points, k)[1])
-
-
-def _plane_normals(centers: np.ndarray, near: np.ndarray) -> np.ndarray:
-    """Unit normals (N, 3), unoriented, of each center (N, 3) with its neighbours' positions (N, k, 3)."""
-    hood = np.concatenate([centers[:, None], near], axis=1)
-    centered = hood - hood.mean(axis=1, keepdims=True)
-    _, vecs = np.linalg.eigh(np.einsum("nki,nkj->nij", centered, centered))
-    return vecs[:, :, 0]
 
 
 def orient_normals(points: np.ndarray, normals: np.ndarray, edges: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -270,46 +252,25 @@ def surface_neighbors(points: np.ndarray, k: int = HEAT_K, cone_deg: float = CON
     a thin wall face away from each other. Needs more than 6k points (fewer: all)."""
     from scipy.spatial import cKDTree
 
+    from ._cloud_ops import cone_neighbors
+
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    given = np.zeros((0, 3)) if normals is None else np.ascontiguousarray(normals, dtype=np.float64)
+    sin_cone = float(np.sin(np.radians(cone_deg)))
     tree = cKDTree(points)
     out = np.empty((len(points), k), dtype=np.int64)
-    rows = np.arange(len(points))
+    rows = np.arange(len(points), dtype=np.int64)
     for candidates in (2 * k, 6 * k):  # most rows are settled by their 2k nearest: the 6k only where not
         candidates = min(candidates, len(points) - 1)
-        nbrs = tree.query(points[rows], candidates + 1, workers=threads.count())[1][:, 1:]
+        nbrs = tree.query(points[rows], candidates + 1, workers=threads.count())[1][:, 1:].astype(np.int64)
 
         def cone(block, rows=rows, nbrs=nbrs):
-            return _cone_neighbors(points[rows[block]], points[nbrs[block]], nbrs[block], k, cone_deg,
-                                   None if normals is None else (normals[rows[block]], normals[nbrs[block]]))
+            return cone_neighbors(points, rows[block], nbrs[block], k, sin_cone, min(CONE_FIT, candidates), given)
         out[rows], settled = threads.by_rows(cone, len(rows))
         rows = rows[~settled]
         if not len(rows) or candidates == len(points) - 1:
             break
     return out
-
-
-def _cone_neighbors(centers, near, nbrs, k: int, cone_deg: float, normals) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`surface_neighbors` of the points ``centers`` among their candidates ``nbrs`` (nearest first,
-    at positions ``near``), and whether each row is settled: had k candidates within the cone (and
-    CONE_FIT for the second fit), so that more candidates would not change it. ``normals``: the points'
-    and their candidates' given normals, or None."""
-    offset = near - centers[:, None]
-    sin_dist = np.sin(np.radians(cone_deg)) * np.sqrt(np.einsum("nkd,nkd->nk", offset, offset))
-
-    def cone(normal):  # the candidates' order: within the cone first, each group nearest first; how many
-        off_plane = np.abs(np.einsum("nkd,nd->nk", offset, normal)) >= sin_dist
-        if normals is not None:
-            off_plane |= np.einsum("nkd,nd->nk", normals[1], normals[0]) <= 0
-        return np.argsort(off_plane, axis=1, kind="stable"), (~off_plane).sum(axis=1)
-
-    if normals is None:
-        fit = min(CONE_FIT, nbrs.shape[1])
-        order, fitted = cone(_plane_normals(centers, near[:, :fit]))
-        order, inside = cone(_plane_normals(centers, np.take_along_axis(near, order[:, :fit, None], axis=1)))
-        settled = (fitted >= fit) & (inside >= k)
-    else:
-        order, inside = cone(normals[0])
-        settled = inside >= k
-    return np.take_along_axis(nbrs, order[:, :k], axis=1), settled
 
 
 def _cloud_field(points: np.ndarray, t_coef: float, normals: np.ndarray | None = None):

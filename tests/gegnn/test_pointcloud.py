@@ -8,8 +8,8 @@ import pytest
 from gegnn_stores import ellipsoid, fibonacci_sphere, small_config
 
 from gegnn import GeGnn
-from gegnn.pointcloud import (_cone_neighbors, _tree_signs, cloud_graph, cloud_landmark_fields, knn_edges,
-                              mls_project, surface_neighbors)
+from gegnn.pointcloud import (_tree_signs, cloud_graph, cloud_landmark_fields, knn_edges, mls_project,
+                              pca_normals, surface_neighbors)
 
 
 def test_knn_edges_are_each_pair_once_and_hold_every_points_neighbours():
@@ -291,7 +291,36 @@ def test_a_mesh_model_given_a_cloud_names_the_model_that_takes_it(tmp_path):
         assert result.exit_code == 1 and f"gegnn query --pretrained points {name} --source I" in result.output
 
 
+def plane_normals_reference(centers, near):
+    """NumPy: the least-variance direction of each center (N, 3) with its neighbours (N, m, 3)."""
+    hood = np.concatenate([centers[:, None], near], axis=1)
+    centered = hood - hood.mean(axis=1, keepdims=True)
+    return np.linalg.eigh(np.einsum("nki,nkj->nij", centered, centered))[1][:, :, 0]
+
+
+def cone_reference(p, nbrs, k, cone_deg, given):
+    """NumPy: each point's k nearest candidates within the cone about its tangent plane (the plane fitted to
+    the point and its 5 nearest, then to the point and its 5 nearest within that cone; or its given normal,
+    and then facing its side), the others after them."""
+    offset = p[nbrs] - p[:, None]
+    sin_dist = np.sin(np.radians(cone_deg)) * np.linalg.norm(offset, axis=2)
+
+    def cone(normal):
+        off_plane = np.abs(np.einsum("nkd,nd->nk", offset, normal)) >= sin_dist
+        if given is not None:
+            off_plane |= np.einsum("nkd,nd->nk", given[nbrs], given) <= 0
+        return np.argsort(off_plane, axis=1, kind="stable")
+
+    if given is None:
+        order = cone(plane_normals_reference(p, p[nbrs[:, :5]]))
+        order = cone(plane_normals_reference(p, p[np.take_along_axis(nbrs, order[:, :5], axis=1)]))
+    else:
+        order = cone(given)
+    return np.take_along_axis(nbrs, order[:, :k], axis=1)
+
+
 def test_surface_neighbours_from_2k_candidates_then_6k_where_needed_equal_those_of_all_6k():
+    """The compiled cone (2k candidates, then 6k for the rows that need them) against NumPy's on all 6k."""
     h = 0.05
     x, y = np.meshgrid(np.arange(30) * h, np.arange(30) * h)
     sheet = np.stack([x.ravel(), y.ravel(), 0.1 * np.sin(3 * x.ravel())], axis=1)
@@ -300,11 +329,35 @@ def test_surface_neighbours_from_2k_candidates_then_6k_where_needed_equal_those_
     normals = np.repeat([[0, 0, -1.0], [0, 0, 1.0]], len(sheet), axis=0)
     for given in (None, normals):
         def among(candidates):
-            nbrs = knn_edges(p, candidates)[1]
-            return _cone_neighbors(p, p[nbrs], nbrs, 15, 30.0, None if given is None else (given, given[nbrs]))[0]
+            return cone_reference(p, knn_edges(p, candidates)[1], 15, 30.0, given)
 
         assert (among(30) != among(90)).any()  # the 2k nearest alone would not do
         np.testing.assert_array_equal(surface_neighbors(p, 15, normals=given), among(90))
+
+
+def test_compiled_fits_equal_numpys():
+    """The projection's quadric fits and the PCA normals (src/cloud_ops.cpp) against NumPy's eigh and solve."""
+    from scipy.spatial import cKDTree
+
+    rng = np.random.default_rng(1)
+    p = fibonacci_sphere(3000) * (1.0, 0.7, 0.5) + rng.normal(scale=0.01, size=(3000, 3))
+    dist, nbrs = cKDTree(p).query(p, 31)
+    hood = p[nbrs]
+    radius = dist[:, -1:]
+    w = np.exp(-(2.0 * dist / radius) ** 2)
+    centroid = (w[..., None] * hood).sum(1) / w.sum(1, keepdims=True)
+    spread = (hood - centroid[:, None]) * np.sqrt(w)[..., None]
+    frame = np.linalg.eigh(spread.transpose(0, 2, 1) @ spread)[1]
+    z, v, u = np.moveaxis((hood - p[:, None]) @ frame, 2, 0)
+    u, v, sw = u / radius, v / radius, np.sqrt(w)
+    a = np.stack([np.ones_like(u), u, v, u * u, u * v, v * v], axis=2) * sw[..., None]
+    c0 = np.linalg.solve(a.transpose(0, 2, 1) @ a + 1e-10 * np.eye(6), a.transpose(0, 2, 1) @ (z * sw)[..., None])
+    c0 = np.where(np.abs(c0[:, 0, 0]) <= 0.5 * radius[:, 0], c0[:, 0, 0], 0.0)
+    projected = mls_project(p)
+    np.testing.assert_allclose(projected, p + c0[:, None] * frame[:, :, 0], rtol=0, atol=1e-13)
+    assert np.abs(projected - p).max() > 0.01  # the noise taken out
+    ours, numpys = pca_normals(p, nbrs[:, 1:9]), plane_normals_reference(p, p[nbrs[:, 1:9]])
+    np.testing.assert_allclose(np.abs(np.einsum("nd,nd->n", ours, numpys)), 1.0, rtol=0, atol=1e-12)
 
 
 def test_query_pairs_of_a_cloud_in_file_numbering(cloud_model, tmp_path):
