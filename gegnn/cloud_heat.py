@@ -5,7 +5,8 @@ or many per solve.
 
 The library's discrete choices (which neighbours, each normal's sign, which local triangles, how the
 cover is glued) each move the fields by 1e-4 to 5e-2 when made differently, so every step replays its
-arithmetic, down to the order of floating-point sums where a choice rests on rounding:
+arithmetic, down to the order of floating-point sums where a choice rests on rounding (the normals and
+local triangulations compiled, ``src/local_triangulation.cpp``; the rest in NumPy):
 
 * **Neighbours**: the :math:`k = 30` nearest other points, nearest first, as nanoflann returns them:
   scipy's k-d tree finds them; rows with two distances equal up to rounding are re-sorted by nanoflann's
@@ -63,8 +64,6 @@ normals differently, which moves fields only on exactly symmetric clouds.
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from . import threads
@@ -74,10 +73,7 @@ __all__ = ["CloudHeatDistance", "local_triangulations", "K_NEIGHBORS"]
 
 K_NEIGHBORS = 30          # geometry-central's PointPositionGeometry::kNeighborSize
 LEAF_SIZE = 10            # nanoflann's default leaf_max_size
-DEGENERATE = 1e-7         # local triangulation's degeneracy threshold, relative to the neighbourhood radius
 MOLLIFY = 1e-5            # mollification margin, relative to the mean soup edge length
-TINY = np.finfo(np.float64).tiny
-EPS = np.finfo(np.float64).eps
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -244,387 +240,6 @@ def _rowwise_lexsort(primary: np.ndarray, secondary: np.ndarray) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------------------------------------
-# Normals and tangent frames: Eigen 3.3's JacobiSVD, replayed for all points at once
-# ---------------------------------------------------------------------------------------------------
-
-def _swap(arr: np.ndarray, rows: np.ndarray, i, j) -> None:
-    """Swap arr[rows, i] and arr[rows, j] (i: scalar or per-row, j per-row), along axis 1."""
-    t = arr[rows, i].copy()
-    arr[rows, i] = arr[rows, j]
-    arr[rows, j] = t
-
-
-def _eigen_sum_squares(x: np.ndarray) -> np.ndarray:
-    """Sum of squares over the last axis in the order of Eigen 3.3's vectorized reduction with SSE2 (the
-    library is built without AVX or FMA; a squared norm always starts its packets at element 0): two
-    2-lane accumulators over blocks of four, merged, one more pair, the two lanes added, then the odd
-    last element."""
-    sq = x * x
-    size = sq.shape[-1]
-    if size < 2:
-        return sq[..., 0] if size else np.zeros(sq.shape[:-1])
-    end2 = size // 4 * 4
-    end = size // 2 * 2
-    p0 = sq[..., 0:2].copy()
-    if end > 2:
-        p1 = sq[..., 2:4].copy()
-        for i in range(4, end2, 4):
-            p0 += sq[..., i:i + 2]
-            p1 += sq[..., i + 2:i + 4]
-        p0 += p1
-        if end > end2:
-            p0 += sq[..., end2:end2 + 2]
-    out = p0[..., 0] + p0[..., 1]
-    if end < size:
-        out = out + sq[..., end]
-    return out
-
-
-def _eigen_dot(x: np.ndarray, y: np.ndarray, start: int) -> np.ndarray:
-    """Dot products over the last axis as Eigen 3.3's row-major GEMV kernel sums one row (SSE2): the
-    elements before the first aligned one (``start``) one by one from zero, then two lanes over the
-    aligned pairs, their sum added, then the odd last element."""
-    prod = x * y
-    depth = prod.shape[-1]
-    out = np.zeros(prod.shape[:-1])
-    for i in range(min(start, depth)):
-        out = out + prod[..., i]
-    end = start + (depth - start) // 2 * 2
-    if end > start:
-        lanes = prod[..., start:start + 2].copy()
-        for i in range(start + 2, end, 2):
-            lanes += prod[..., i:i + 2]
-        out = out + (lanes[..., 0] + lanes[..., 1])
-    for i in range(end, depth):
-        out = out + prod[..., i]
-    return out
-
-
-def _householder_r(a: np.ndarray):
-    """Eigen's ColPivHouseholderQR of each (K, 3) matrix ``a`` (given transposed, (N, 3, K), and
-    overwritten): the 3 x 3 R (as its transpose, lower triangular) and the column permutation."""
-    n, c, k_rows = a.shape
-    direct = np.sqrt(_eigen_sum_squares(a))
-    updated = direct.copy()
-    perm = np.tile(np.arange(c), (n, 1))
-    downdate_floor = math.sqrt(EPS)
-    for k in range(c):
-        big = k + np.argmax(updated[:, k:], axis=1)           # first of the largest remaining norms
-        sw = np.flatnonzero(big != k)
-        if len(sw):
-            for arr in (a, updated, direct, perm):
-                _swap(arr, sw, k, big[sw])
-        c0 = a[:, k, k]
-        tail = a[:, k, k + 1:]
-        tail_sq = _eigen_sum_squares(tail)
-        plain = tail_sq <= TINY
-        beta = np.sqrt(c0 * c0 + tail_sq)
-        beta = np.where(c0 >= 0, -beta, beta)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            essential = tail / (c0 - beta)[:, None]
-            tau = (beta - c0) / beta
-        beta = np.where(plain, c0, beta)
-        tau = np.where(plain, 0.0, tau)
-        essential[plain] = 0.0
-        a[:, k, k] = beta
-        scaled_essential = tau[:, None] * essential
-        for j in range(k + 1, c):
-            col = a[:, j, k:]
-            # applyHouseholderOnTheLeft: tmp = essential' * bottom (Eigen's row-major GEMV) + row 0; the
-            # essential part starts at element k * K + k + 1 of the 16-byte aligned column-major storage
-            tmp = _eigen_dot(essential, col[:, 1:], (k * k_rows + k + 1) % 2) + col[:, 0]
-            apply = tau != 0
-            new0 = col[:, 0] - tau * tmp
-            new_tail = col[:, 1:] - tmp[:, None] * scaled_essential
-            a[:, j, k] = np.where(apply, new0, col[:, 0])
-            a[:, j, k + 1:] = np.where(apply[:, None], new_tail, col[:, 1:])
-            u = updated[:, j]
-            with np.errstate(divide="ignore", invalid="ignore"):
-                t = np.abs(a[:, j, k]) / u
-                t = (1 + t) * (1 - t)
-                t = np.where(t < 0, 0.0, t)
-                t2 = t * (u / direct[:, j]) ** 2
-            nonzero = u != 0
-            redo = nonzero & (t2 <= downdate_floor)
-            scaled = nonzero & ~redo
-            rest = a[redo, j, k + 1:]
-            direct[redo, j] = updated[redo, j] = np.sqrt(_eigen_sum_squares(rest))
-            updated[scaled, j] = u[scaled] * np.sqrt(t[scaled])
-    w = np.zeros((n, c, c))
-    for i in range(c):
-        w[:, i, :i + 1] = a[:, i, :i + 1]                     # W = R^T: row i of W is column i of R
-    return w, perm
-
-
-def _normals(offsets: np.ndarray) -> np.ndarray:
-    """(N, 3) unit normals: the last column of U of Eigen's ``JacobiSVD(M, ComputeThinU)`` for each
-    point's 3 x k matrix M of neighbour offsets (``offsets``: (N, k, 3))."""
-    n = len(offsets)
-    rows = np.arange(n)
-    scale = np.abs(offsets).reshape(n, -1).max(1)
-    scale[scale == 0] = 1.0
-    wt, perm = _householder_r(np.ascontiguousarray((offsets / scale[:, None, None]).transpose(0, 2, 1)))
-    w = [[wt[:, i, j].copy() for j in range(3)] for i in range(3)]      # W = R^T, entry by entry
-    ut = np.zeros((n, 3, 3))
-    ut[rows[:, None], perm, np.arange(3)[None]] = 1.0         # U starts as the column permutation
-    u = [[ut[:, i, j].copy() for j in range(3)] for i in range(3)]
-    max_diag = np.maximum(np.maximum(np.abs(w[0][0]), np.abs(w[1][1])), np.abs(w[2][2]))
-    # Jacobi sweeps over all points at once; a pair that needs no rotation gets (c, s) = (1, 0),
-    # which leaves every entry as it is
-    while True:
-        rotated = False
-        for p, q in ((1, 0), (2, 0), (2, 1)):
-            threshold = np.maximum(TINY, 2 * EPS * max_diag)
-            go = (np.abs(w[p][q]) > threshold) | (np.abs(w[q][p]) > threshold)
-            if not go.any():
-                continue
-            rotated = True
-            m00, m01, m10, m11 = w[p][p], w[p][q], w[q][p], w[q][q]
-            with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-                # real_2x2_jacobi_svd: a rotation making the block symmetric, then its Jacobi rotation
-                t = m00 + m11
-                d = m10 - m01
-                flat = np.abs(d) < TINY
-                ratio = t / d
-                root = np.sqrt(1 + ratio * ratio)
-                s1 = np.where(flat, 0.0, 1 / root)
-                c1 = np.where(flat, 1.0, ratio / root)
-                a00 = c1 * m00 + s1 * m10
-                a01 = c1 * m01 + s1 * m11
-                a11 = -s1 * m01 + c1 * m11
-                deno = 2 * np.abs(a01)
-                tau = (a00 - a11) / deno
-                wv = np.sqrt(tau * tau + 1)
-                tt = np.where(tau > 0, 1 / (tau + wv), 1 / (tau - wv))
-                nn = 1 / np.sqrt(tt * tt + 1)
-                sr = -np.where(tt > 0, 1.0, -1.0) * (a01 / np.abs(a01)) * np.abs(tt) * nn
-            none = deno < TINY
-            cr = np.where(none | ~go, 1.0, nn)
-            sr = np.where(none | ~go, 0.0, sr)
-            c1 = np.where(go, c1, 1.0)
-            s1 = np.where(go, s1, 0.0)
-            cl = c1 * cr + s1 * sr                            # j_left = rot1 * j_right^T
-            sl = -c1 * sr + s1 * cr
-            for j in range(3):                                # rows p, q of W by j_left
-                w[p][j], w[q][j] = cl * w[p][j] + sl * w[q][j], -sl * w[p][j] + cl * w[q][j]
-            for i in range(3):                                # columns p, q of U by j_left
-                u[i][p], u[i][q] = cl * u[i][p] + sl * u[i][q], -sl * u[i][p] + cl * u[i][q]
-            for i in range(3):                                # columns p, q of W by j_right
-                w[i][p], w[i][q] = cr * w[i][p] - sr * w[i][q], sr * w[i][p] + cr * w[i][q]
-            max_diag = np.maximum(max_diag, np.maximum(np.abs(w[p][p]), np.abs(w[q][q])))
-        if not rotated:
-            break
-    sv = np.stack([np.abs(w[i][i]) for i in range(3)], 1)
-    ut = np.stack([np.stack([np.where(w[j][j] < 0, -u[i][j], u[i][j]) for j in range(3)], 1) for i in range(3)], 1)
-    for i in range(3):                                        # sort descending, first maximum wins
-        pos = i + np.argmax(sv[:, i:], axis=1)
-        sw = np.flatnonzero((pos != i) & (sv[rows, pos] != 0))
-        _swap(sv, sw, i, pos[sw])
-        t = ut[sw, :, i].copy()
-        ut[sw, :, i] = ut[sw, :, pos[sw]]
-        ut[sw, :, pos[sw]] = t
-    normal = ut[:, :, 2]
-    return normal * (1 / np.sqrt(_norm2(normal)))[:, None]
-
-
-def _norm2(v: np.ndarray) -> np.ndarray:
-    """x^2 + y^2 (+ z^2) summed left to right, as geometry-central's Vector2/Vector3."""
-    out = v[..., 0] * v[..., 0] + v[..., 1] * v[..., 1]
-    if v.shape[-1] == 3:
-        out = out + v[..., 2] * v[..., 2]
-    return out
-
-
-def _dot3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
-
-
-def _cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1],
-                     a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
-                     a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)
-
-
-def _unit3(v: np.ndarray) -> np.ndarray:
-    return v * (1 / np.sqrt(_norm2(v)))[..., None]
-
-
-def _tangent_coordinates(offsets: np.ndarray, normals: np.ndarray) -> np.ndarray:
-    """(N, k, 2): each neighbour offset without its normal component, in the point's tangent frame
-    (Vector3::buildTangentBasis of the normal)."""
-    unit = _unit3(normals)
-    test = np.zeros_like(unit)
-    near_x = np.abs(unit[:, 0]) > 0.9                         # |dot(e_x, n)|
-    test[~near_x, 0] = 1.0
-    test[near_x, 1] = 1.0
-    bx = _unit3(_cross3(test, unit))
-    by = _unit3(_cross3(unit, bx))
-    flat = offsets - normals[:, None, :] * _dot3(normals[:, None, :], offsets)[..., None]
-    return np.stack([_dot3(bx[:, None, :], flat), _dot3(by[:, None, :], flat)], axis=-1)
-
-
-# ---------------------------------------------------------------------------------------------------
-# Local Delaunay triangulations (buildLocalTriangulations with its degeneracy heuristic)
-# ---------------------------------------------------------------------------------------------------
-
-def _std_sort(key: list) -> list:
-    """The order libstdc++'s std::sort leaves 0, 1, ..., n - 1 in when comparing key[a] < key[b]:
-    introsort (median of three moved to the front, unguarded partition) down to 16 elements, then
-    insertion sort. Equal keys end up in its (unstable) order, which the local triangulation keeps."""
-    a = list(range(len(key)))
-
-    def less(i, j):
-        return key[i] < key[j]
-
-    def median_to_first(result, x, y, z):
-        if less(a[x], a[y]):
-            if less(a[y], a[z]):
-                pick = y
-            elif less(a[x], a[z]):
-                pick = z
-            else:
-                pick = x
-        elif less(a[x], a[z]):
-            pick = x
-        elif less(a[y], a[z]):
-            pick = z
-        else:
-            pick = y
-        a[result], a[pick] = a[pick], a[result]
-
-    def introsort(first, last, depth):
-        while last - first > 16:
-            if depth == 0:                                    # heapsort fallback (never for n < 2^9)
-                a[first:last] = sorted(a[first:last], key=lambda i: key[i])
-                return
-            depth -= 1
-            median_to_first(first, first + 1, first + (last - first) // 2, last - 1)
-            lo, hi, pivot = first + 1, last, a[first]
-            while True:
-                while less(a[lo], pivot):
-                    lo += 1
-                hi -= 1
-                while less(pivot, a[hi]):
-                    hi -= 1
-                if not lo < hi:
-                    break
-                a[lo], a[hi] = a[hi], a[lo]
-                lo += 1
-            introsort(lo, last, depth)
-            last = lo
-
-    def linear_insert(i):
-        val = a[i]
-        while less(val, a[i - 1]):
-            a[i] = a[i - 1]
-            i -= 1
-        a[i] = val
-
-    n = len(a)
-    if n > 1:
-        introsort(0, n, 2 * (n.bit_length() - 1))
-        for i in range(1, min(n, 16)):                        # __insertion_sort on the first 16
-            if less(a[i], a[0]):
-                val = a[i]
-                a[1:i + 1] = a[0:i]
-                a[0] = val
-            else:
-                linear_insert(i)
-        for i in range(16, n):                                # __unguarded_insertion_sort on the rest
-            linear_insert(i)
-    return a
-
-
-def _local_triangles(coords: np.ndarray, neighbors: np.ndarray) -> np.ndarray:
-    """(F, 3) int64: every point's triangles (point, neighbour, next neighbour), point by point."""
-    n, k, _ = coords.shape
-    pts = coords.copy()
-    radius = np.sqrt(np.max(_norm2(pts), axis=1))
-    usable = np.isfinite(radius) & (radius > 0)
-    # Push neighbours that (nearly) coincide with the point out along their direction (or a fixed one).
-    dist = np.sqrt(_norm2(pts))
-    close = np.argwhere(dist < (radius * DEGENERATE)[:, None])
-    if len(close):
-        i, j = close[:, 0], close[:, 1]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            direction = pts[i, j] * (1 / dist[i, j])[:, None]
-        bad = ~np.isfinite(direction).all(1)
-        theta = (2.0 * math.pi * j[bad]) / k
-        direction[bad] = np.stack([np.cos(theta), np.sin(theta)], axis=1)
-        length = (1.0 + j / k) * radius[i] * DEGENERATE * 10
-        pts[i, j] = length[:, None] * direction
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inv = 1 / np.sqrt(_norm2(pts))
-        angle = np.arctan2(pts[..., 1] * inv, pts[..., 0] * inv)
-    order = np.argsort(angle, axis=1, kind="stable")
-    tied = (np.diff(np.take_along_axis(angle, order, 1), axis=1) == 0).any(1)
-    for i in np.flatnonzero(tied):                            # equal angles: std::sort's own order
-        order[i] = _std_sort(angle[i].tolist())
-    nb = np.take_along_axis(neighbors, order, 1)
-    # Only neighbourhoods with two directions closer than 1e-5 rad can meet the collinearity test
-    # (|a x c| < 1e-7 |a| |c|): the others skip it
-    ring = np.sort(angle, axis=1)
-    gap = np.minimum(np.diff(ring, axis=1).min(1), ring[:, 0] + 2 * math.pi - ring[:, -1])
-    near_rows = np.repeat(~(gap > 1e-5), k)                  # by flat base (point * k)
-    x = np.take_along_axis(pts[..., 0], order, 1)
-    y = np.take_along_axis(pts[..., 1], order, 1)
-    sq = x * x + y * y
-    # (N * k, 4) table of x, y, |.|, |.|^2 by (point, angular position); the kept positions of each
-    # point as a doubly linked ring (prv, nxt)
-    table = np.stack([x.ravel(), y.ravel(), np.sqrt(sq).ravel(), sq.ravel()], axis=1)
-    valid = np.repeat(usable, k)
-    position = np.arange(k)
-    prv = np.tile((position - 1) % k, n)
-    nxt = np.tile((position + 1) % k, n)
-    active = np.flatnonzero(usable) * k
-    changed = np.zeros(n * k, dtype=bool)
-    while len(active):
-        for m in range(k):
-            at = active[valid[active + m]]                    # rows (as flat bases) still keeping m
-            cur = at + m
-            a = prv[cur]
-            b = nxt[cur]
-            cx, cy, lc, c2 = np.take(table, cur, axis=0).T
-            ax, ay, la, a2 = np.take(table, at + a, axis=0).T
-            bx, by, lb, b2 = np.take(table, at + b, axis=0).T
-            cross_ca = cx * ay - cy * ax                      # cross(cur, prev)
-            cross_cb = cx * by - cy * bx                      # cross(cur, next)
-            cross_ab = ax * by - bx * ay
-            # Eigen's 4x4 determinant of rows (0, 0, 0, 1), prev, next, cur (Costabel's products, here
-            # with the zero terms and signs folded exactly)
-            det = cross_cb * a2 - (cross_ab * c2 + cross_ca * b2)
-            drop = (cross_ca < 0) & (cross_cb > 0) & ~(det > 0)   # both triangles there, not Delaunay
-            near = np.flatnonzero(near_rows[at])
-            if len(near):                                     # of collinear neighbours keep the closest
-                cx_, cy_, lc_ = cx[near], cy[near], lc[near]
-                ax_, ay_, la_ = ax[near], ay[near], la[near]
-                bx_, by_, lb_ = bx[near], by[near], lb[near]
-                drop[near] |= ((np.abs(cross_ca[near]) < (la_ * lc_) * DEGENERATE) & (cx_ * ax_ + cy_ * ay_ > 0)
-                               & (lc_ > la_))
-                drop[near] |= ((np.abs(cross_cb[near]) < (lb_ * lc_) * DEGENERATE) & (cx_ * bx_ + cy_ * by_ > 0)
-                               & (lc_ > lb_))
-            hit = np.flatnonzero(drop)
-            if not len(hit):
-                continue
-            at, a, b = at[hit], a[hit], b[hit]
-            hit = (a != m) & (a != b)                         # three distinct kept neighbours
-            at, a, b = at[hit], a[hit], b[hit]
-            valid[at + m] = False
-            nxt[at + a] = b
-            prv[at + b] = a
-            changed[at] = True
-        active = np.flatnonzero(changed)
-        changed[active] = False
-    valid = valid.reshape(n, k)
-    nxt = nxt.reshape(n, k)
-    p, i = np.nonzero(valid)
-    j = nxt[p, i]
-    emit = (j != i) & (x[p, i] * y[p, j] - y[p, i] * x[p, j] > 0)   # not a gap of pi or more
-    p, i, j = p[emit], i[emit], j[emit]
-    return np.stack([p, nb[p, i], nb[p, j]], axis=1).astype(np.int64)
-
-
-# ---------------------------------------------------------------------------------------------------
 # Tufted cover of the triangle soup, operators
 # ---------------------------------------------------------------------------------------------------
 
@@ -655,7 +270,7 @@ def _soup_cover(points: np.ndarray, faces: np.ndarray) -> _Cover:
     soup_edge = np.empty(n_h, dtype=np.int64)
     soup_edge[by_key] = group_rank[np.cumsum(new_group) - 1]
     d = points[tail[h0]] - points[tip[h0]]
-    length = np.sqrt(_norm2(d))
+    length = np.sqrt((d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]) + d[:, 2] * d[:, 2])  # Vector3's norm, in its order
     # mollify the soup: one epsilon for all lengths
     la = length[soup_edge]
     nxt3 = (3 * np.arange(n_f)[:, None] + np.array([1, 2, 0])).ravel()
@@ -821,22 +436,20 @@ def _distinct_faces(cover: _Cover, h: np.ndarray, n: int) -> tuple[np.ndarray, n
 
 def local_triangulations(points, neighbors: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Each point's normal (N, 3) and its local Delaunay triangles, the soup (F, 3) of
-    :class:`CloudHeatDistance` (its ``neighbors``: potpourri3d's 30 nearest where None); row by row, on
-    torch's threads (:func:`gegnn.threads.by_rows`). ValueError for points the method cannot take."""
+    :class:`CloudHeatDistance` (its ``neighbors``: potpourri3d's 30 nearest where None); compiled
+    (``src/local_triangulation.cpp``: the module's normals and local triangulations, the library's arithmetic
+    in its order), in blocks of rows on torch's threads (:func:`gegnn.threads.by_rows`). ValueError for
+    points the method cannot take."""
+    from ._local_triangulation import local_triangulations as triangulate
+
     p = np.ascontiguousarray(points, dtype=np.float64)
     if p.ndim != 2 or p.shape[1] != 3 or len(p) <= K_NEIGHBORS:
         raise ValueError(f"cloud heat method: need (N, 3) points with N > {K_NEIGHBORS}")
     if not np.isfinite(p).all():
         raise ValueError("cloud heat method: non-finite coordinates")
-    neighbors = _nearest(p) if neighbors is None else np.asarray(neighbors, dtype=np.int64)
-
-    def local(rows):
-        offsets = p[neighbors[rows]] - p[rows, None, :]
-        normals = _normals(offsets)
-        faces = _local_triangles(_tangent_coordinates(offsets, normals), neighbors[rows])
-        faces[:, 0] += rows.start
-        return normals, faces
-    normals, faces = threads.by_rows(local, len(p))
+    neighbors = np.ascontiguousarray(_nearest(p) if neighbors is None else neighbors, dtype=np.int64)
+    normals, faces = threads.by_rows(
+        lambda rows: triangulate(p, np.arange(rows.start, rows.stop, dtype=np.int64), neighbors[rows]), len(p))
     if np.bincount(faces.ravel(), minlength=len(p)).min() == 0:
         raise ValueError("cloud heat method: a point in no local triangle (degenerate neighbourhood)")
     return normals, faces

@@ -5,7 +5,7 @@ import pytest
 from gegnn_stores import fibonacci_sphere
 
 from geodata.examples import bumpy_sphere
-from gegnn.cloud_heat import CloudHeatDistance, _local_triangles, _nearest, _normals, _tangent_coordinates
+from gegnn.cloud_heat import CloudHeatDistance, local_triangulations
 
 pp3d = pytest.importorskip("potpourri3d")
 
@@ -68,14 +68,11 @@ def test_normals_and_local_triangles_equal_potpourri3d(name):
     """The discrete choices behind the fields: each normal's sign (Eigen's SVD; flipping them all moves
     the fields by ~3e-3) and every local triangle, in order (neighbour ties on the grid and the box)."""
     p = CLOUDS[name]()
-    neighbors = _nearest(p)
-    offsets = p[neighbors] - p[:, None]
-    normals = _normals(offsets)
+    normals, faces = local_triangulations(p)
     _, _, their_normals = pp3d.PointCloudHeatSolver(p).get_tangent_frames()
     np.testing.assert_allclose(normals, their_normals, rtol=0, atol=1e-12)
     triangles = pp3d.PointCloudLocalTriangulation(p).get_local_triangulation()
-    np.testing.assert_array_equal(_local_triangles(_tangent_coordinates(offsets, normals), neighbors),
-                                  triangles[triangles[:, :, 0] >= 0])
+    np.testing.assert_array_equal(faces, triangles[triangles[:, :, 0] >= 0])
 
 
 def test_unit_sphere_fields_are_near_great_circles():
