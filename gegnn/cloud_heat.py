@@ -51,12 +51,13 @@ meshes (:class:`gegnn.heat.HeatSolver`).
 
 Measured against potpourri3d 1.4.0 (``benchmarks/bench_cloud_heat.py``; one core of a 2-core AMD EPYC
 shared with other work, medians): on the 19 validation clouds (~5,000 points) every normal (bitwise)
-and local triangle is the library's, and the fields differ by at most 4e-14 of their largest value (up
+and local triangle is the library's, and the fields differ by at most 5e-14 of their largest value (up
 to 3e-10 on exactly symmetric synthetic clouds such as grids, 4e-9 with duplicate points: rounding, with
-the same normals and triangles). Setup 190 ms (potpourri3d 110 ms, plus 40 ms factoring on its first
-field); a field 1.0 ms one source at a time, 0.84 ms in a 128-source solve (potpourri3d 5.5 ms); 128
-farthest-point landmark fields, setup included, 0.30 s (0.92 s), the same landmarks. bumpy_sphere(8000):
-setup 370 ms (300 + 110), a field 2.2 ms, 1.6 ms batched (14.7 ms); 128 landmark fields 0.8 s (2.4 s).
+the same normals and triangles). 2026-11-24, a slow spell of the machine (potpourri3d timed in the
+same run): setup 115 ms (potpourri3d 110 ms, plus 46 ms factoring on its first field); a field 0.80 ms
+one source at a time, 0.40 ms in a 128-source solve (potpourri3d 5.4 ms); 128 farthest-point landmark
+fields, setup included, 0.23 s (0.97 s), the same landmarks. bumpy_sphere(8000): setup 258 ms (396 +
+157), a field 2.2 ms, 1.6 ms batched (19 ms); 128 landmark fields 0.44 s (2.6 s).
 
 Supported: finite points, more than :math:`k` of them, every point in some local triangle (ValueError
 otherwise). Replayed for x86-64 builds of potpourri3d (SSE2, libstdc++); other builds may round the
