@@ -450,7 +450,7 @@ def local_triangulations(points, neighbors: np.ndarray | None = None) -> tuple[n
         raise ValueError("cloud heat method: non-finite coordinates")
     neighbors = np.ascontiguousarray(_nearest(p) if neighbors is None else neighbors, dtype=np.int64)
     normals, faces = threads.by_rows(
-        lambda rows: triangulate(p, np.arange(rows.start, rows.stop, dtype=np.int64), neighbors[rows]), len(p))
+        lambda rows: triangulate(p, threads.indices(rows), neighbors[rows]), len(p))
     if np.bincount(faces.ravel(), minlength=len(p)).min() == 0:
         raise ValueError("cloud heat method: a point in no local triangle (degenerate neighbourhood)")
     return normals, faces

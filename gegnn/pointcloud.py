@@ -112,11 +112,7 @@ def mls_project(points: np.ndarray, k: int = MLS_K) -> np.ndarray:
     k = min(k, len(points) - 1)
     dist, nbrs = cKDTree(points).query(points, k + 1, workers=threads.count())
     nbrs = nbrs.astype(np.int64, copy=False)
-    return threads.by_rows(lambda rows: project(points, _indices(rows), nbrs[rows], dist[rows]), len(points))
-
-
-def _indices(rows: slice) -> np.ndarray:
-    return np.arange(rows.start, rows.stop, dtype=np.int64)
+    return threads.by_rows(lambda rows: project(points, threads.indices(rows), nbrs[rows], dist[rows]), len(points))
 
 
 def pca_normals(points: np.ndarray, nbrs: np.ndarray) -> np.ndarray:
@@ -126,7 +122,7 @@ def pca_normals(points: np.ndarray, nbrs: np.ndarray) -> np.ndarray:
 
     points = np.ascontiguousarray(points, dtype=np.float64)
     nbrs = np.ascontiguousarray(nbrs, dtype=np.int64)
-    return threads.by_rows(lambda rows: plane_normals(points, _indices(rows), nbrs[rows]), len(points))
+    return threads.by_rows(lambda rows: plane_normals(points, threads.indices(rows), nbrs[rows]), len(points))
 
 
 def unoriented_normals(points: np.ndarray, k: int = KNN) -> np.ndarray:

@@ -28,7 +28,7 @@ from contextlib import contextmanager
 
 import numpy as np
 
-__all__ = ["count", "beside", "by_rows", "fewer_for_torch", "MIN_ROWS"]
+__all__ = ["count", "beside", "by_rows", "indices", "fewer_for_torch", "MIN_ROWS"]
 
 MIN_ROWS = 2048  # fewer rows are not split: a thread costs ~0.1 ms, a block of 1k rows of a cloud ~1 ms
 
@@ -94,3 +94,8 @@ def by_rows(compute: Callable[[slice], np.ndarray | tuple], n: int):
     if isinstance(parts[0], tuple):
         return tuple(np.concatenate(column) for column in zip(*parts))
     return np.concatenate(parts)
+
+
+def indices(rows: slice) -> np.ndarray:
+    """The row numbers (int64) of a block of :func:`by_rows`, for compiled kernels that take them."""
+    return np.arange(rows.start, rows.stop, dtype=np.int64)

@@ -8,7 +8,8 @@
 //   cone_neighbors  the k nearest candidates q within a cone about the tangent plane,
 //                   |n . (q - p)| < sin(cone) |q - p| (and n_q . n_p > 0 with given normals), n fitted twice
 //                   where not given: to the point and its `fit` nearest, then to the point and its `fit`
-//                   nearest within that first cone.
+//                   nearest within that first cone; a row is settled where it had k candidates within
+//                   the cone (and `fit` within the first), so that more candidates would not change it.
 //
 // Eigen's SelfAdjointEigenSolver (eigenvalues ascending) and LDLT stand for LAPACK's eigh and solve: the same
 // fits to rounding.
