@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from geodata.mesh import Mesh, vertex_components
+from geodata.mesh import Mesh
 
 from .query import require_edge_manifold
 
@@ -82,13 +82,14 @@ class MatrixFile:
 
 
 class FileMatrix:
-    """The matrix of a file's vertices written through the network mesh's: ``rows`` and ``cols`` are file
-    vertex indices, ``to_mesh`` maps them to the mesh (-1: used by no face). Assigned blocks get NaN where
-    a row or column vertex is unused or the two lie on separate parts, then go to ``out``."""
+    """The matrix of a file's vertices (or a cloud's points) written through the network's: ``rows`` and
+    ``cols`` are file indices, ``to_mesh`` maps them to the network's vertices (-1: used by no face, or a
+    cloud's outlier), ``labels`` gives each network vertex its part (``vertex_components`` of a mesh, a
+    cloud embedding's ``part``). Assigned blocks get NaN where a row or column is not on the network or
+    the two lie on separate parts, then go to ``out``."""
 
-    def __init__(self, out, mesh: Mesh, to_mesh: np.ndarray, rows: np.ndarray, cols: np.ndarray):
+    def __init__(self, out, labels: np.ndarray, to_mesh: np.ndarray, rows: np.ndarray, cols: np.ndarray):
         self.out, self.shape = out, (len(rows), len(cols))
-        labels = vertex_components(mesh)
         self.row_vertex, self.col_vertex = to_mesh[rows], to_mesh[cols]
         self.row_part = np.where(self.row_vertex >= 0, labels[np.maximum(self.row_vertex, 0)], -1)
         self.col_part = np.where(self.col_vertex >= 0, labels[np.maximum(self.col_vertex, 0)], -2)

@@ -243,11 +243,11 @@ def test_mesh_commands_refuse_a_point_cloud_model(cloud_model, tmp_path):
 
     cloud_model.save(tmp_path / "cloud.safetensors")
     trimesh.creation.icosphere(2).export(tmp_path / "m.obj")
-    for command in (["pairwise", "-o", str(tmp_path / "d.npy")], ["texture", "--center", "0", "-o", str(tmp_path / "t.png")]):
-        result = CliRunner().invoke(main, [command[0], str(tmp_path / "cloud.safetensors"), str(tmp_path / "m.obj"),
-                                           *command[1:]])
-        assert result.exit_code == 2 and "is a point-cloud model" in result.output, result.output
-    for command in (["view", "-o", str(tmp_path / "v.html")], ["query", "--source", "0"]):  # these take clouds
+    result = CliRunner().invoke(main, ["texture", str(tmp_path / "cloud.safetensors"), str(tmp_path / "m.obj"),
+                                       "--center", "0", "-o", str(tmp_path / "t.png")])
+    assert result.exit_code == 2 and "is a point-cloud model" in result.output, result.output
+    for command in (["view", "-o", str(tmp_path / "v.html")], ["query", "--source", "0"],  # these take clouds
+                    ["pairwise", "-o", str(tmp_path / "d.npy")]):
         result = CliRunner().invoke(main, [command[0], str(tmp_path / "cloud.safetensors"), str(tmp_path / "m.obj"),
                                            *command[1:]])
         assert result.exit_code == 1 and "m.obj: not a point-cloud file" in result.output, result.output
@@ -393,3 +393,36 @@ def test_query_pairs_of_a_cloud_in_file_numbering(cloud_model, tmp_path):
     result = CliRunner().invoke(main, ["query", str(tmp_path / "cloud.safetensors"), str(tmp_path / "cloud.xyz"),
                                        "--pairs", str(tmp_path / "pairs.csv"), "--exact"])
     assert result.exit_code != 0 and "--exact goes with --source" in result.output
+
+
+def test_pairwise_matrix_of_a_cloud_in_file_numbering(cloud_model, tmp_path):
+    """gegnn pairwise with a point-cloud model: the embedding's matrix in the file's numbering, exactly
+    symmetric, NaN in the outlier's row and column and between the two parts; --rows gives those rows."""
+    from click.testing import CliRunner
+
+    from gegnn.cli import main
+
+    a, b = fibonacci_sphere(400), fibonacci_sphere(300, center=(6.0, 0, 0))
+    cloud = np.concatenate([a, [[40.0, 0, 0]], b])  # point 400: an outlier
+    np.savetxt(tmp_path / "cloud.xyz", cloud)
+    cloud_model.save(tmp_path / "cloud.safetensors")
+    args = ["pairwise", str(tmp_path / "cloud.safetensors"), str(tmp_path / "cloud.xyz")]
+    result = CliRunner().invoke(main, [*args, "-o", str(tmp_path / "d.npy")])
+    assert result.exit_code == 0 and "701 x 701 predicted geodesic distances" in result.output, result.output
+    d = np.load(tmp_path / "d.npy")
+    kept = np.delete(np.arange(len(cloud)), 400)
+    reference = cloud_model.embed(cloud[kept]).matrix()
+    first, second = np.arange(400), np.arange(401, 701)
+    np.testing.assert_allclose(d[np.ix_(first, first)], reference[:400, :400], rtol=1e-6)
+    np.testing.assert_allclose(d[np.ix_(second, second)], reference[400:, 400:], rtol=1e-6)
+    assert np.isnan(d[400]).all() and np.isnan(d[:, 400]).all() and np.isnan(d[np.ix_(first, second)]).all()
+    np.testing.assert_array_equal(d, d.T)
+    np.savetxt(tmp_path / "rows.txt", [5, 400, 650], fmt="%d")
+    result = CliRunner().invoke(main, [*args, "--rows", str(tmp_path / "rows.txt"), "-o", str(tmp_path / "r.npy")])
+    assert result.exit_code == 0, result.output
+    np.testing.assert_allclose(np.load(tmp_path / "r.npy"), d[[5, 400, 650]], rtol=1e-6)
+    np.savetxt(tmp_path / "bad.txt", [701], fmt="%d")
+    result = CliRunner().invoke(main, [*args, "--rows", str(tmp_path / "bad.txt"), "-o", str(tmp_path / "x.npy")])
+    assert result.exit_code != 0 and "point 701 out of range: cloud.xyz has 701 points" in result.output
+    result = CliRunner().invoke(main, [*args, "--exact", "-o", str(tmp_path / "x.npy")])
+    assert result.exit_code == 2 and "--exact, --heat and --prepare take a mesh" in result.output
