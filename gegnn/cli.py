@@ -250,8 +250,8 @@ def query(files, pretrained, source, pairs_csv, points_file, output, exact, clou
         if exact and pairs_csv:
             raise click.UsageError("--exact goes with --source (it compares whole fields)")
         if pairs_csv:
-            return _query_cloud_pairs(model_spec, pretrained, mesh_path, pairs_csv, output,
-                                      _output_suffix(output, (".csv",)), device, precision)
+            _output_suffix(output, (".csv",))
+            return _query_cloud_pairs(model_spec, pretrained, mesh_path, pairs_csv, output, device, precision)
         return _query_cloud(model_spec, pretrained, mesh_path, source, output,
                             _output_suffix(output, (".npy", ".ply", ".png")), exact, cloud_mesh, device, precision,
                             up, size)
@@ -539,11 +539,7 @@ def _pairwise_cloud(model_spec, pretrained, cloud_path, output, rows_file, dtype
     rows = _matrix_rows(rows_file, n, name, "point", "points")
     model = _load_model(model_spec, pretrained, device, clouds=True)
     start = time.perf_counter()
-    try:
-        emb = model.embed(cloud.points[keep], normals=None if cloud.normals is None else cloud.normals[keep],
-                          precision=precision)
-    except ValueError as exc:
-        raise click.ClickException(f"{cloud_path}: {exc}") from None
+    emb = _embed_cloud(model, cloud, keep, cloud_path, precision)
     to_kept = np.full(n, -1)
     to_kept[keep] = np.arange(len(keep))
     Path(output).parent.mkdir(parents=True, exist_ok=True)
@@ -628,10 +624,7 @@ def _view_cloud(model_spec, pretrained, cloud_path, sources, exact, mesh_path, o
             fields = {s: exact_at_points(qm.mesh, points, s, model.config.distance)[0] for s in local}
         except MeshError as exc:
             raise click.ClickException(f"{mesh_path}: --exact: {exc.reason}") from None
-    try:
-        emb = model.embed(points, normals=normals, precision=precision)
-    except ValueError as exc:
-        raise click.ClickException(f"{cloud_path}: {exc}") from None
+    emb = _embed_cloud(model, cloud, keep, cloud_path, precision)
     label = f"--pretrained {model_spec}" if pretrained else Path(model_spec).name
     page = view_page(emb, title=f"{name}: {model.config.distance} distance predicted by GeGnn",
                      meta=f"{len(points):,} points of {len(cloud.points):,}"
@@ -672,6 +665,16 @@ def _load_cloud(cloud_path, sources, err: bool = False):
     return cloud, np.setdiff1d(np.arange(n), far)
 
 
+def _embed_cloud(model, cloud, keep, cloud_path, precision):
+    """The model's embedding of a cloud file's kept points (with the file's normals, if it has them); a cloud
+    the model cannot take fails naming the file."""
+    try:
+        return model.embed(cloud.points[keep], normals=None if cloud.normals is None else cloud.normals[keep],
+                           precision=precision)
+    except ValueError as exc:
+        raise click.ClickException(f"{cloud_path}: {exc}") from None
+
+
 def _write_pairs(pairs, distances, output) -> None:
     """A CSV i,j,distance of the pairs in the file's numbering, to ``output`` or stdout."""
     lines = ["i,j,distance"] + [f"{i},{j},{x:.6g}" for (i, j), x in zip(pairs.tolist(), distances.tolist())]
@@ -682,7 +685,7 @@ def _write_pairs(pairs, distances, output) -> None:
         click.echo("\n".join(lines))
 
 
-def _query_cloud_pairs(model_spec, pretrained, cloud_path, pairs_csv, output, suffix, device, precision):
+def _query_cloud_pairs(model_spec, pretrained, cloud_path, pairs_csv, output, device, precision):
     """``gegnn query --pairs`` with a point-cloud model: the distance of every pair of the file's points, NaN
     where a point is a far outlier or the two lie on different parts of the neighbour graph."""
     import numpy as np
@@ -701,12 +704,7 @@ def _query_cloud_pairs(model_spec, pretrained, cloud_path, pairs_csv, output, su
         row = int(np.flatnonzero(bad.any(axis=1))[0])
         raise click.ClickException(f"{pairs_csv}: pair {row + 1}: point {pairs[bad][0]} out of range: {name} has "
                                    f"{n} points")
-    model = _load_model(model_spec, pretrained, device, clouds=True)
-    normals = None if cloud.normals is None else cloud.normals[keep]
-    try:
-        emb = model.embed(cloud.points[keep], normals=normals, precision=precision)
-    except ValueError as exc:
-        raise click.ClickException(f"{cloud_path}: {exc}") from None
+    emb = _embed_cloud(_load_model(model_spec, pretrained, device, clouds=True), cloud, keep, cloud_path, precision)
     local = np.searchsorted(keep, pairs)
     kept = (local < len(keep)) & (keep[np.minimum(local, len(keep) - 1)] == pairs)
     local = np.where(kept, local, 0)
@@ -735,11 +733,7 @@ def _query_cloud(model_spec, pretrained, cloud_path, source, output, suffix, exa
     cloud, keep = _load_cloud(cloud_path, [source])
     points, n = cloud.points, len(cloud.points)
     model = _load_model(model_spec, pretrained, device, clouds=True)
-    normals = None if cloud.normals is None else cloud.normals[keep]
-    try:
-        emb = model.embed(points[keep], normals=normals, precision=precision)
-    except ValueError as exc:
-        raise click.ClickException(f"{cloud_path}: {exc}") from None
+    emb = _embed_cloud(model, cloud, keep, cloud_path, precision)
     part = emb.part
     local = int(np.searchsorted(keep, source))
     field = np.full(n, np.nan)
