@@ -146,6 +146,7 @@ nb::tuple cone_neighbors(const Points& points, const Rows& centers, const Index&
         nb::gil_scoped_release released;
         std::vector<int64_t> order(static_cast<size_t>(m));
         std::vector<char> inside(static_cast<size_t>(m));
+        std::vector<int64_t> first(static_cast<size_t>(fit));  // the second fit's points
         for (int64_t r = 0; r < rows; ++r) {
             const int64_t i = centers.data()[r];
             const int64_t* near = nbrs.data() + r * m;
@@ -169,7 +170,7 @@ nb::tuple cone_neighbors(const Points& points, const Rows& centers, const Index&
                 done = cone(point(normals.data(), i)) >= k;
             } else {
                 const bool fitted = cone(plane_normal(x, i, near, fit)) >= fit;
-                const std::vector<int64_t> first(order.begin(), order.begin() + fit);
+                std::copy(order.begin(), order.begin() + fit, first.begin());
                 const bool enough = cone(plane_normal(x, i, first.data(), fit)) >= k;
                 done = fitted && enough;
             }

@@ -84,9 +84,25 @@ double eigen_dot(const double* x, const double* y, int64_t depth, int64_t start)
     return out;
 }
 
-// The unit normal of one point from its k offsets (k x 3, row-major): Eigen's JacobiSVD(M, ComputeThinU)
-// of the 3 x k matrix M = offsets^T, last column of U.
-std::array<double, 3> svd_normal(const double* offsets, int64_t k, std::vector<double>& a) {
+// One point's working arrays, made once a call and reused point after point: the k offsets (k x 3), the
+// QR's columns and Householder vector, the tangent coordinates (pushed out where degenerate), their
+// angles and angular order, the sorted coordinates and the ring of kept neighbours.
+struct Scratch {
+    explicit Scratch(int64_t k)
+        : offsets(static_cast<size_t>(3 * k)), a(offsets.size()), essential(static_cast<size_t>(k)), px(essential),
+          py(essential), angle(essential), x(essential), y(essential), len(essential), sq(essential),
+          order(static_cast<size_t>(k)), prv(order), nxt(order), valid(static_cast<size_t>(k)) {}
+    std::vector<double> offsets, a, essential, px, py, angle, x, y, len, sq;
+    std::vector<int64_t> order, prv, nxt;
+    std::vector<char> valid;
+};
+
+// The unit normal of one point from its k offsets (s.offsets, k x 3, row-major): Eigen's
+// JacobiSVD(M, ComputeThinU) of the 3 x k matrix M = offsets^T, last column of U.
+std::array<double, 3> svd_normal(int64_t k, Scratch& s) {
+    const double* offsets = s.offsets.data();
+    std::vector<double>& a = s.a;
+    std::vector<double>& essential = s.essential;
     double scale = 0.0;
     for (int64_t e = 0; e < 3 * k; ++e) scale = std::max(scale, std::abs(offsets[e]));
     if (scale == 0.0) scale = 1.0;
@@ -97,7 +113,6 @@ std::array<double, 3> svd_normal(const double* offsets, int64_t k, std::vector<d
     int perm[3] = {0, 1, 2};
     for (int c = 0; c < 3; ++c) direct[c] = updated[c] = std::sqrt(eigen_sum_squares(&a[c * k], k));
     const double downdate_floor = std::sqrt(EPS);
-    std::vector<double> essential(static_cast<size_t>(k));
     for (int col = 0; col < 3; ++col) {
         int big = col;
         for (int c = col + 1; c < 3; ++c)
@@ -234,10 +249,12 @@ V3 unit(const V3& v) {
     return {v[0] * inv, v[1] * inv, v[2] * inv};
 }
 
-// The point's triangles (point, a, b) appended to `faces` from its neighbours' tangent coordinates.
-void local_triangles(int64_t point, const int64_t* neighbors, const std::vector<double>& cx,
-                     const std::vector<double>& cy, int64_t k, std::vector<int64_t>& faces) {
-    std::vector<double> px(cx), py(cy), angle(static_cast<size_t>(k));
+// The point's triangles (point, a, b) appended to `faces` from its neighbours' tangent coordinates
+// (s.px, s.py).
+void local_triangles(int64_t point, const int64_t* neighbors, int64_t k, Scratch& s, std::vector<int64_t>& faces) {
+    std::vector<double> &px = s.px, &py = s.py, &angle = s.angle, &x = s.x, &y = s.y, &len = s.len, &sq = s.sq;
+    std::vector<int64_t> &order = s.order, &prv = s.prv, &nxt = s.nxt;
+    std::vector<char>& valid = s.valid;
     double radius2 = 0.0;
     for (int64_t j = 0; j < k; ++j) {
         if (!(std::isfinite(px[j]) && std::isfinite(py[j]))) return;  // no usable neighbourhood
@@ -263,23 +280,20 @@ void local_triangles(int64_t point, const int64_t* neighbors, const std::vector<
         const double inv = 1 / std::sqrt(px[j] * px[j] + py[j] * py[j]);
         angle[j] = std::atan2(py[j] * inv, px[j] * inv);
     }
-    std::vector<int64_t> order(static_cast<size_t>(k));
     std::iota(order.begin(), order.end(), 0);
     std::sort(order.begin(), order.end(), [&](int64_t a, int64_t b) { return angle[a] < angle[b]; });
     // only neighbourhoods with two directions closer than 1e-5 rad can meet the collinearity test
     double gap = angle[order[0]] + 2 * PI - angle[order[k - 1]];
     for (int64_t j = 1; j < k; ++j) gap = std::min(gap, angle[order[j]] - angle[order[j - 1]]);
     const bool near = !(gap > 1e-5);
-    std::vector<double> x(static_cast<size_t>(k)), y(x), len(x), sq(x);
     for (int64_t j = 0; j < k; ++j) {
         x[j] = px[order[j]];
         y[j] = py[order[j]];
         sq[j] = x[j] * x[j] + y[j] * y[j];
         len[j] = std::sqrt(sq[j]);
     }
-    std::vector<int64_t> prv(static_cast<size_t>(k)), nxt(prv);
-    std::vector<char> valid(static_cast<size_t>(k), 1);
     for (int64_t j = 0; j < k; ++j) {
+        valid[j] = 1;
         prv[j] = (j + k - 1) % k;
         nxt[j] = (j + 1) % k;
     }
@@ -333,13 +347,14 @@ nb::tuple local_triangulations(const Points& points, const Rows& centers, const 
     auto* faces = new std::vector<int64_t>();
     {
         nb::gil_scoped_release released;
-        std::vector<double> offsets(static_cast<size_t>(3 * k)), a(offsets.size()), tx(static_cast<size_t>(k)), ty(tx);
+        Scratch s(k);
+        std::vector<double>& offsets = s.offsets;
         for (int64_t r = 0; r < rows; ++r) {
             const int64_t i = centers.data()[r];
             const int64_t* nb_row = neighbors.data() + r * k;
             for (int64_t j = 0; j < k; ++j)
                 for (int c = 0; c < 3; ++c) offsets[3 * j + c] = p[3 * nb_row[j] + c] - p[3 * i + c];
-            const V3 normal = svd_normal(offsets.data(), k, a);
+            const V3 normal = svd_normal(k, s);
             for (int c = 0; c < 3; ++c) normals[3 * r + c] = normal[c];
             // the tangent frame of the normal (Vector3::buildTangentBasis) and the offsets in it
             const V3 u = unit(normal);
@@ -349,10 +364,10 @@ nb::tuple local_triangulations(const Points& points, const Rows& centers, const 
                 const V3 o = {offsets[3 * j], offsets[3 * j + 1], offsets[3 * j + 2]};
                 const double along = dot(normal, o);
                 const V3 flat = {o[0] - normal[0] * along, o[1] - normal[1] * along, o[2] - normal[2] * along};
-                tx[j] = dot(bx, flat);
-                ty[j] = dot(by, flat);
+                s.px[j] = dot(bx, flat);
+                s.py[j] = dot(by, flat);
             }
-            local_triangles(i, nb_row, tx, ty, k, *faces);
+            local_triangles(i, nb_row, k, s, *faces);
         }
     }
     nb::capsule normals_owner(normals, [](void* q) noexcept { delete[] static_cast<double*>(q); });
