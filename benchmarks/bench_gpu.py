@@ -19,7 +19,7 @@ import torch
 import trimesh
 
 from gegnn import GeGnn
-from gegnn.train import relative_error, train_step
+from gegnn.train import relative_error, set_deterministic, train_step
 
 PAPER_EMBED_S, PAPER_QUERIES_S = 0.089, 0.042  # per mesh, per 1M queries; RTX 3090, 256 channels
 
@@ -101,7 +101,7 @@ def section_training(v, f, device, steps):
     print("| mode | step (ms) | loss after the steps |")
     print("|---|---:|---:|")
     for deterministic in (False, True):
-        torch.use_deterministic_algorithms(deterministic)
+        set_deterministic(deterministic)
         torch.manual_seed(0)
         model = GeGnn().to(device)
         opt = torch.optim.AdamW(model.parameters(), lr=1e-4, weight_decay=0.01)
@@ -109,7 +109,7 @@ def section_training(v, f, device, steps):
         with torch.no_grad():
             loss = relative_error(model(batch.hierarchy, batch.pairs), batch.distances).mean().item()
         print(f"| {'deterministic' if deterministic else 'default'} | {step_s * 1000:.0f} | {loss:.4f} |")
-    torch.use_deterministic_algorithms(False)
+    set_deterministic(False)
 
 
 def main():

@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import csv
 import math
-import os
 from pathlib import Path
 
 import click
@@ -90,7 +89,7 @@ def _blocks(ctx, param, value):
 @DEVICE_OPTION
 @click.option("--workers", callback=_workers, default="auto", show_default=True, metavar="N|auto",
               help="Loader processes per process building batches (0: in the training process). auto: on a "
-                   "GPU one per spare CPU core, at most 8 (one GPU needs about 5-6 at batch 4: docs/gpu.md); "
+                   "GPU one per spare CPU core, at most 8 (an H100 needs 2-3 at batch 4: docs/gpu.md); "
                    "on a CPU 0.")
 @click.option("--resume", is_flag=True,
               help="Continue RUN/last.safetensors (its own options): bitwise-exact on a CPU, on a GPU with "
@@ -138,8 +137,6 @@ def train(store, run_dir, epochs, batch_size, lr, weight_decay, warmup_epochs, c
     """Train GeGnn on the geodata store STORE."""
     from .train import TrainConfig, train as run_training
 
-    if deterministic:  # cuBLAS is deterministic only with a fixed workspace, set before CUDA starts
-        os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
     cfg = TrainConfig(store=store, run=run_dir, epochs=epochs, batch_size=batch_size, lr=lr,
                       weight_decay=weight_decay, warmup_epochs=warmup_epochs, clip_grad=clip_grad,
                       distance=distance, pairs_per_mesh=pairs_per_mesh, val_fraction=val_fraction, val_store=val_store,

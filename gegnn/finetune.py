@@ -82,7 +82,7 @@ def finetune(model, vertices, faces, sources: int = 64, held_out: int = 8, steps
     h, lm_fields = hierarchy(), lm_fields()
     mesh = Mesh(np.asarray(vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64))
     train_src, held_src = split_sources(largest_part(mesh), sources, held_out, seed)
-    exact = exact_fields(mesh, np.concatenate([train_src, held_src])) / scale  # normalized units
+    exact = exact_fields(mesh, np.concatenate([train_src, held_src]), model.config.distance) / scale  # normalized
     train_pairs, train_d = _pairs(train_src, exact[:sources])
     held_pairs, held_d = _pairs(held_src, exact[sources:])
     train_pairs, train_d, held_pairs, held_d = (t.to(device) for t in (train_pairs, train_d, held_pairs, held_d))

@@ -189,7 +189,6 @@ class GeGnn(nn.Module):
         return x
 
     # -- inference on raw meshes -----------------------------------------------------------------------
-    @torch.inference_mode()
     def embed(self, vertices: np.ndarray, faces: np.ndarray | None = None, device=None, precision: str = "fp32",
               normals: np.ndarray | None = None):
         """Embed one mesh, or for a point-cloud model (``config.points``) one point cloud, given as NumPy
@@ -209,12 +208,16 @@ class GeGnn(nn.Module):
         Returns:
             :class:`gegnn.embedding.Embedding`
         """
-        from .embedding import Embedding
-
         if precision not in ("fp32", "bf16"):
             raise ValueError(f"precision must be 'fp32' or 'bf16', got {precision!r}")
-        if device is not None:
+        if device is not None:  # outside inference mode: moved parameters stay trainable
             self.to(device)
+        with torch.inference_mode():
+            return self._embed(vertices, faces, precision, normals)
+
+    def _embed(self, vertices, faces, precision, normals):
+        from .embedding import Embedding
+
         device = next(self.parameters()).device
         if self.config.points:
             if faces is not None:
@@ -328,12 +331,13 @@ class GeGnn(nn.Module):
 
     @classmethod
     def from_checkpoint(cls, path, map_location="cpu") -> "GeGnn":
-        """Rebuild the network from a checkpoint file alone (config from its metadata)."""
+        """Rebuild the network from a checkpoint file alone (config from its metadata), on the device
+        ``map_location``."""
         from .checkpoint import load_checkpoint
-        ckpt = load_checkpoint(path, map_location)
+        ckpt = load_checkpoint(path)
         model = cls(ckpt.config)
         model.load_state_dict(ckpt.model_state)  # fp16 weights are cast to the model's fp32
-        return model.eval()
+        return model.to(map_location).eval()
 
 
 def pretrained_file(name: str | None = None):

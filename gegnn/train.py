@@ -1,7 +1,8 @@
 """Training and evaluation loops (one file, nanoGPT style).
 
 Single process: ``gegnn train OUT --run RUN``. Multi-process: ``torchrun --nproc-per-node K -m gegnn.cli
-train OUT --run RUN`` (DistributedDataParallel; gloo on CPU, nccl on GPU; meshes sharded by rank).
+train OUT --run RUN`` (DistributedDataParallel; meshes sharded by rank; NCCL where every rank has a GPU of its
+own, gloo on CPUs and where ranks share a GPU).
 """
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ import math
 import os
 import time
 from dataclasses import dataclass
+from datetime import timedelta
 from pathlib import Path
 
 import torch
@@ -34,6 +36,9 @@ WARMUP_LR = 1e-3  # decoder warm-up: a small MLP on fixed codes (the network's -
 WARMUP_BYTES = 2 << 30  # decoder warm-up: codes and pairs kept on the device, per rank
 MAX_AUTO_WORKERS = 8  # --workers auto on a GPU: one per spare CPU core, at most this many (docs/benchmarks.md)
 PROGRESS_EVERY = 25  # steps between progress-bar updates (each reads a loss from the device)
+# Collectives may wait this long: ranks meet after filling the field cache, whose shares can differ by many
+# meshes (NCCL's default of 10 minutes would end a long fill).
+DIST_TIMEOUT = timedelta(hours=6)
 
 
 @dataclass(frozen=True)
@@ -78,29 +83,52 @@ def lr_at(step: int, total: int, base: float, warmup: int) -> float:
 class Dist:
     rank: int = 0
     world: int = 1
+    owned: bool = False  # this module made the process group, and ends it
 
     @property
     def main(self) -> bool:
         return self.rank == 0
 
 
+def dist_backend(device: torch.device, gpus: int | None = None) -> str:
+    """NCCL where each of this node's ranks drives a GPU of its own; gloo on CPUs and where ranks share a
+    GPU (NCCL refuses two ranks on one device)."""
+    if device.type != "cuda":
+        return "gloo"
+    gpus = torch.cuda.device_count() if gpus is None else gpus
+    return "nccl" if int(os.environ.get("LOCAL_WORLD_SIZE", "1")) <= gpus else "gloo"
+
+
 def setup_distributed(device: torch.device) -> Dist:
     """Join the process group torchrun describes (or one the caller already made)."""
     if not dist.is_initialized() and int(os.environ.get("WORLD_SIZE", "1")) > 1:
-        dist.init_process_group("nccl" if device.type == "cuda" else "gloo")
+        dist.init_process_group(dist_backend(device), timeout=DIST_TIMEOUT)
+        return Dist(dist.get_rank(), dist.get_world_size(), owned=True)
     if not dist.is_initialized():
         return Dist()
     return Dist(dist.get_rank(), dist.get_world_size())
 
 
-def pick_device(name: str) -> torch.device:
+def pick_device(name: str, gpus: int | None = None) -> torch.device:
+    """The device ``name`` means for this process: ``auto`` is CUDA where there is one; a rank of torchrun
+    takes GPU LOCAL_RANK (modulo the GPUs there are, so ranks may share one)."""
     if name == "auto":
         name = "cuda" if torch.cuda.is_available() else "cpu"
     device = torch.device(name)
+    if device.type == "cuda" and device.index is None:
+        gpus = torch.cuda.device_count() if gpus is None else gpus
+        device = torch.device("cuda", int(os.environ.get("LOCAL_RANK", "0")) % max(gpus, 1))
     if device.type == "cuda":
-        device = torch.device("cuda", int(os.environ.get("LOCAL_RANK", "0")))
         torch.cuda.set_device(device)
     return device
+
+
+def set_deterministic(enabled: bool) -> None:
+    """torch's deterministic algorithms on or off. cuBLAS is deterministic only with a fixed workspace, which
+    it reads when CUDA starts: set here (unless the user set one), before any CUDA work of the process."""
+    if enabled:
+        os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
+    torch.use_deterministic_algorithms(enabled)
 
 
 def cpus_per_process() -> int:
@@ -358,16 +386,18 @@ def train(cfg: TrainConfig, model_config: GeGnnConfig | None = None) -> list[dic
         saved = {k: v for k, v in resume.metadata["train_config"].items() if k not in RESUME_KEEPS}
         cfg = dataclasses.replace(cfg, **saved)
     previous = torch.are_deterministic_algorithms_enabled()
-    torch.use_deterministic_algorithms(previous or cfg.deterministic)
-    try:
-        return _train(cfg, model_config, resume, run)
-    finally:
-        torch.use_deterministic_algorithms(previous)
-
-
-def _train(cfg: TrainConfig, model_config, resume, run: Path) -> list[dict]:
+    set_deterministic(previous or cfg.deterministic)
     device = pick_device(cfg.device)
     ctx = setup_distributed(device)
+    try:
+        return _train(cfg, model_config, resume, run, device, ctx)
+    finally:
+        torch.use_deterministic_algorithms(previous)
+        if ctx.owned:
+            dist.destroy_process_group()
+
+
+def _train(cfg: TrainConfig, model_config, resume, run: Path, device, ctx: Dist) -> list[dict]:
     if ctx.main:
         run.mkdir(parents=True, exist_ok=True)
     if ctx.world > 1:

@@ -200,6 +200,25 @@ def test_finetune_lowers_the_held_out_error():
     assert not model.training
 
 
+def test_finetune_scores_a_biharmonic_model_against_biharmonic_distances():
+    """The held-out error before any step is the model's error against exact *biharmonic* distances
+    (geodata.biharmonic, computed here independently), not against geodesic ones (~10x apart here)."""
+    from geodata.biharmonic import biharmonic_distances
+    from geodata.mesh import Mesh
+    from gegnn.train import relative_error
+
+    m = trimesh.creation.icosphere(2)
+    v = np.asarray(m.vertices) * [1.0, 0.6, 0.4]  # longest half-extent 1: normalized units are the mesh's
+    model = GeGnn.pretrained("biharmonic")
+    r = model.finetune(v, m.faces, sources=2, held_out=3, decoder_steps=0, head_steps=0)
+    exact = biharmonic_distances(Mesh(v, np.asarray(m.faces)), r.held_out_sources)  # (3, N)
+    emb = model.embed(v, m.faces)
+    s, t = np.nonzero(exact > 0)
+    pred = emb.distance(r.held_out_sources[s], t)
+    expected = relative_error(torch.as_tensor(pred), torch.as_tensor(exact[s, t], dtype=torch.float32)).mean()
+    assert r.mre_before == pytest.approx(float(expected), rel=1e-3)
+
+
 # -- commands ----------------------------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def ellipsoid_obj(tmp_path_factory):

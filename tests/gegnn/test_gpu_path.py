@@ -41,6 +41,53 @@ def test_embed_moves_the_model_to_the_device_asked_for():
     assert emb.features.device.type == "meta" and next(model.parameters()).device.type == "meta"
 
 
+def test_a_model_moved_by_embed_can_still_train():
+    """embed(device=...) moves the model outside inference mode: its parameters stay ordinary tensors, so a
+    training step (finetune, a trainer) can save them for backward afterwards."""
+    model = GeGnn(small_config())
+    v, f = ellipsoid()
+    model.embed(v, f, device="meta")
+    assert not any(p.is_inference() for p in model.parameters())
+    out = model.distance(torch.ones(4, 16, device="meta", requires_grad=True), torch.ones(4, 16, device="meta"))
+    out.sum().backward()
+    assert all(p.grad is not None for p in model.distance.parameters())
+
+
+@pytest.mark.parametrize("load", [lambda: GeGnn.pretrained(map_location="meta"),
+                                  lambda: GeGnn.pretrained("paper", map_location="meta")])
+def test_checkpoints_load_onto_the_device_asked_for(load):
+    model = load()
+    assert {p.device.type for p in model.parameters()} == {"meta"}
+
+
+def test_ranks_sharing_a_gpu_use_gloo_and_one_gpu_each(monkeypatch):
+    """NCCL refuses two ranks on one GPU: where a node's ranks outnumber its GPUs the group is gloo and
+    LOCAL_RANK wraps around the GPUs; with a GPU per rank, NCCL and the rank's own GPU."""
+    monkeypatch.setattr(torch.cuda, "set_device", lambda device: None)
+    cuda = torch.device("cuda")
+    for local_world, gpus, backend in [("2", 1, "gloo"), ("2", 2, "nccl"), ("8", 4, "gloo"), ("1", 1, "nccl")]:
+        monkeypatch.setenv("LOCAL_WORLD_SIZE", local_world)
+        assert gtrain.dist_backend(cuda, gpus) == backend
+    assert gtrain.dist_backend(torch.device("cpu"), 4) == "gloo"
+    monkeypatch.setenv("LOCAL_RANK", "3")
+    assert gtrain.pick_device("cuda", gpus=2) == torch.device("cuda", 1)
+    assert gtrain.pick_device("cuda", gpus=4) == torch.device("cuda", 3)
+    assert gtrain.pick_device("cuda:0", gpus=4) == torch.device("cuda", 0)  # an explicit index is kept
+
+
+def test_deterministic_mode_sets_the_cublas_workspace_wherever_it_is_turned_on(monkeypatch):
+    """The Python API (train(), benchmarks) and the CLI share one switch: cuBLAS needs a fixed workspace
+    for deterministic results, and torch refuses deterministic CUDA matmuls without it."""
+    monkeypatch.delenv("CUBLAS_WORKSPACE_CONFIG", raising=False)
+    previous = torch.are_deterministic_algorithms_enabled()
+    try:
+        gtrain.set_deterministic(True)
+        assert torch.are_deterministic_algorithms_enabled()
+        assert __import__("os").environ["CUBLAS_WORKSPACE_CONFIG"] == ":4096:8"
+    finally:
+        torch.use_deterministic_algorithms(previous)
+
+
 # -- ScatterMax: ties share the gradient ---------------------------------------------------------------
 def _max_gradient(msg, index, grad_out, reference=False):
     msg = msg.detach().requires_grad_()

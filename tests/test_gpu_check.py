@@ -1,0 +1,67 @@
+"""scripts/gpu_check.py cannot report PASS over a failed step: its runner and its CUDA-against-CPU comparison,
+with steps broken on purpose."""
+import importlib.util
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+spec = importlib.util.spec_from_file_location("gpu_check", ROOT / "scripts" / "gpu_check.py")
+gpu_check = sys.modules["gpu_check"] = importlib.util.module_from_spec(spec)  # dataclasses look it up there
+spec.loader.exec_module(gpu_check)
+Step = gpu_check.Step
+
+
+def _eval_csv(path, rows):
+    path.write_text("mesh_id,vertices,pairs,mre\n" + "".join(f"{m},100,1000,{mre}\n" for m, mre in rows))
+    return path
+
+
+def test_a_failing_step_fails_the_check_and_the_others_still_run(tmp_path):
+    """A step that exits non-zero, one that raises and one that crashes mid-way each FAIL, the steps after
+    them still run (the report is complete), and the verdict names exactly the failed ones."""
+    py = sys.executable
+
+    def raises(log):
+        raise AssertionError("CUDA and CPU differ")
+
+    steps = [Step("good", [py, "-c", "print('fine')"]),
+             Step("exits", [py, "-c", "import sys; print('partial'); sys.exit(3)"]),
+             Step("raises", [], raises),
+             Step("crashes", [py, "-c", "import os; os.abort()"]),
+             Step("after", [py, "-c", "print('still ran')"])]
+    results = gpu_check.run_steps(steps, tmp_path)
+    assert [(name, ok) for name, ok, _ in results] == [("good", True), ("exits", False), ("raises", False),
+                                                       ("crashes", False), ("after", True)]
+    assert gpu_check.verdict(results) == "GPU check: FAIL (3 of 5 steps: exits, raises, crashes)"
+    assert "still ran" in (tmp_path / "after.log").read_text()
+    assert "CUDA and CPU differ" in (tmp_path / "raises.log").read_text()
+    ok = gpu_check.run_steps([steps[0], steps[-1]], tmp_path)
+    assert gpu_check.verdict(ok) == "GPU check: PASS (all 2 steps)"
+
+
+def test_eval_comparison_holds_cuda_to_the_cpu(tmp_path):
+    cpu = _eval_csv(tmp_path / "cpu.csv", [("a", 0.0100), ("b", 0.0200), ("overall", 0.0150)])
+    near = _eval_csv(tmp_path / "near.csv", [("a", 0.010001), ("b", 0.0200), ("overall", 0.015)])
+    lines = gpu_check.compare_evals(near, cpu)
+    assert len(lines) == 3 and "1.0e-04" in lines[0]
+    far = _eval_csv(tmp_path / "far.csv", [("a", 0.0100), ("b", 0.0201), ("overall", 0.0150)])  # 5e-3 apart
+    with pytest.raises(AssertionError, match="on b"):
+        gpu_check.compare_evals(far, cpu)
+    missing = _eval_csv(tmp_path / "missing.csv", [("a", 0.0100), ("overall", 0.0150)])
+    with pytest.raises(AssertionError, match="other meshes"):
+        gpu_check.compare_evals(missing, cpu)
+    nan = _eval_csv(tmp_path / "nan.csv", [("a", "nan"), ("b", 0.0200), ("overall", 0.0150)])
+    with pytest.raises(AssertionError, match="on a"):
+        gpu_check.compare_evals(nan, cpu)
+
+
+def test_the_check_without_cuda_fails_at_once(tmp_path):
+    """The environment step itself fails on a machine without CUDA (this one, in CI), and so the check."""
+    import torch
+
+    if torch.cuda.is_available():
+        pytest.skip("a CUDA device is here")
+    results = gpu_check.run_steps([Step("environment", [], gpu_check.check_environment)], tmp_path)
+    assert not results[0][1] and "no CUDA device" in (tmp_path / "environment.log").read_text()
