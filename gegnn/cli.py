@@ -17,8 +17,11 @@ UP_OPTION = click.option("--up", type=click.Choice(["auto", *UP_AXES]), default=
 PREPARE_OPTION = click.option("--prepare", is_flag=True, help="Run the geodata pipeline first (watertight, remesh "
                               "to ~5k vertices: the meshes the model was trained on).")
 DEVICE_OPTION = click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True)
-PRECISION_OPTION = click.option("--precision", type=click.Choice(["fp32", "bf16"]), default="fp32", show_default=True,
-                                help="Network precision (bf16: faster on recent CPUs and GPUs).")
+PRECISION_OPTION = click.option(
+    "--precision", type=click.Choice(["fp32", "bf16", "auto"]), default="fp32", show_default=True,
+    help="Network and decoder precision. bf16: ~2x faster where the hardware has native bf16 (AVX512-BF16 or AMX "
+         "CPUs, CUDA GPUs from compute capability 8.0), slower where it is emulated, distances within ~1%. auto: "
+         "bf16 only where it is native.")
 SIZE_OPTION = click.option("--size", default=480, show_default=True, help="Pixels across a rendered mesh (PNG).")
 PRETRAINED_HELP = ("Use a model shipped in the package instead of CHECKPOINT: the most accurate one, or NAME "
                    f"({', '.join(repr(name) for name in PRETRAINED)}).")
@@ -428,8 +431,7 @@ def view(files, pretrained, output, sources, exact, cloud_mesh, dtype, prepare, 
 @click.option("--prepare", is_flag=True, help="Run the geodata pipeline first (watertight, remesh to ~5k "
                                               "vertices); rows and columns stay the file's vertices.")
 @DEVICE_OPTION
-@click.option("--precision", type=click.Choice(["fp32", "bf16"]), default="fp32", show_default=True,
-              help="Network and decoder precision (bf16: faster on recent CPUs and GPUs).")
+@PRECISION_OPTION
 def pairwise(files, pretrained, output, rows_file, dtype, exact, heat, jobs, prepare, device, precision):
     """The whole distance matrix of MESH: every vertex (or --rows) to every vertex, predicted by
     CHECKPOINT or --pretrained, or for comparison computed by the exact solver (--exact) or the heat

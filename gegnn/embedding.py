@@ -5,19 +5,13 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from . import precision as _precision
+
 __all__ = ["Embedding"]
 
 CHUNK_VALUES = 1 << 20  # values a decoded chunk holds in flight on a CPU: intermediates stay in cache
 ACCELERATOR_CHUNK_VALUES = 1 << 27  # ... on a GPU: few launches (512 MB of fp32 codes)
 SURFACE_CHUNK = 4096  # pairs of distinct surface points blended at once (6 code rows a pair)
-
-
-def _bf16_is_fast(device: torch.device) -> bool:
-    # bf16 matmuls are ~3x fp32 on CPUs with AVX512-BF16/AMX (measured on this project's CPU);
-    # elsewhere they are emulated and slower, so fall back to fp32.
-    if device.type == "cuda":
-        return True
-    return bool(torch.backends.mkldnn.is_available() and torch.ops.mkldnn._is_mkldnn_bf16_supported())
 
 
 class Embedding:
@@ -30,8 +24,9 @@ class Embedding:
             with the landmark fields and positions (:meth:`gegnn.decoders.LandmarkDecoder.codes`).
         decoder: the model's :class:`gegnn.decoders.DistanceDecoder` or ``LandmarkDecoder``.
         scale: factor from normalized units to the input's units.
-        precision: ``"auto"`` (bf16 decoder where bf16 matmuls are fast, else fp32), ``"bf16"`` or
-            ``"fp32"``. bf16 changes distances by ~0.3% relative (median), well below the model's error.
+        precision: the decoder's hidden layers in ``"fp32"`` (the default), ``"bf16"``, or ``"auto"``:
+            bf16 only where the hardware has native bf16 (:mod:`gegnn.precision`). bf16 changes
+            distances by ~0.3% relative (median), below the model's error.
         chunk: pairs decoded per batch. On a CPU about 1M values in flight (the decoder's
             ``pair_width`` a pair: 8192 pairs of two 64-d embeddings, 14768 pairs of the landmark
             decoder's 71 fused inputs): large enough for the matmul kernels, small enough that
@@ -44,7 +39,7 @@ class Embedding:
             graph it was embedded on (distances between parts mean nothing); None for a mesh.
     """
 
-    def __init__(self, features: Tensor, decoder, scale: float = 1.0, precision: str = "auto",
+    def __init__(self, features: Tensor, decoder, scale: float = 1.0, precision: str = "fp32",
                  chunk: int | None = None, vertices: np.ndarray | None = None, faces: np.ndarray | None = None,
                  part: np.ndarray | None = None):
         self.features = features.detach()
@@ -55,9 +50,8 @@ class Embedding:
         self.decoder, self.scale = decoder, float(scale)
         values = CHUNK_VALUES if self.features.device.type == "cpu" else ACCELERATOR_CHUNK_VALUES
         self.chunk = chunk or max(1024, values // decoder.pair_width(self.features))
-        if precision == "auto":
-            precision = "bf16" if _bf16_is_fast(self.features.device) else "fp32"
-        self.dtype = {"bf16": torch.bfloat16, "fp32": torch.float32}[precision]
+        self.precision = _precision.resolve(precision, self.features.device)
+        self.dtype = _precision.DTYPES[self.precision]
         self._layers = self._decoder_layers()
 
     @property

@@ -20,6 +20,7 @@ from .decoders import DistanceDecoder, LandmarkDecoder, SpectralDecoder
 from .fields import FieldSpec
 from .graph import Graph, directed_edges
 from .nn import GeoConv, GeoPool, GeoUnpool, Hierarchy, ResBlocks, build_hierarchy
+from .precision import resolve
 from .threads import beside, fewer_for_torch
 
 __all__ = ["GeGnnConfig", "GeGnn", "DistanceDecoder", "LandmarkDecoder", "SpectralDecoder"]
@@ -199,8 +200,10 @@ class GeGnn(nn.Module):
         result are in the input's units, between the input's vertices (a cloud's duplicate points share
         their codes; its ``part`` labels the parts of its neighbour graph). ``device`` (default: where the
         model is) moves the model there, as ``model.to(device)`` would, and the embedding lives there.
-        ``precision="bf16"`` runs the network under bf16 autocast: ~2x faster on CPUs with AVX512-BF16,
-        embeddings within ~1% (relative norm) of fp32. With more than one torch thread
+        ``precision`` governs the network and the returned embedding's decoder alike: ``"fp32"`` (the
+        default), ``"bf16"`` (the network under bf16 autocast, the decoder's hidden layers in bf16: ~2x
+        faster on CPUs with AVX512-BF16, embeddings within ~1% (relative norm) of fp32), or ``"auto"``:
+        bf16 only where the hardware has native bf16 (:mod:`gegnn.precision`). With more than one torch thread
         (``torch.set_num_threads``) the U-Net runs on a thread of its own while the fields are computed,
         and a cloud's row-wise steps are spread over the threads (:mod:`gegnn.threads`); the result is the
         same to the bit.
@@ -208,8 +211,7 @@ class GeGnn(nn.Module):
         Returns:
             :class:`gegnn.embedding.Embedding`
         """
-        if precision not in ("fp32", "bf16"):
-            raise ValueError(f"precision must be 'fp32' or 'bf16', got {precision!r}")
+        resolve(precision, "cpu")  # an unknown precision fails before any work
         if device is not None:  # outside inference mode: moved parameters stay trainable
             self.to(device)
         with torch.inference_mode():
@@ -219,6 +221,7 @@ class GeGnn(nn.Module):
         from .embedding import Embedding
 
         device = next(self.parameters()).device
+        precision = resolve(precision, device)
         if self.config.points:
             if faces is not None:
                 raise ValueError("a point-cloud model takes points only (faces=None)")
@@ -248,7 +251,7 @@ class GeGnn(nn.Module):
         self.train(was_training)
         if expand is not None:
             codes = codes[torch.as_tensor(expand, device=device)]
-        return Embedding(codes, self.distance, scale, vertices=vertices, faces=faces, part=part)
+        return Embedding(codes, self.distance, scale, precision, vertices=vertices, faces=faces, part=part)
 
     def inputs(self, vertices: np.ndarray, faces: np.ndarray, device) -> tuple[Callable, Callable, float]:
         """What the network reads for one mesh in any units, as two functions that :meth:`embed` runs side
