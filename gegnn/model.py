@@ -280,7 +280,7 @@ class GeGnn(nn.Module):
         row-by-row set-up is made here, on all of torch's threads; the rest on one, by the function), the
         scale back to the input's units; and the distinct point of every input point (N,) and the part of
         every input point (N,)."""
-        from .pointcloud import cloud_graph, cloud_landmark_solver
+        from .pointcloud import cloud_graph, cloud_landmark_solver, collinear
 
         points = np.asarray(points, dtype=np.float64)
         if points.ndim != 2 or points.shape[1] != 3 or not np.isfinite(points).all():
@@ -294,6 +294,8 @@ class GeGnn(nn.Module):
             if normals.shape != points.shape or not np.isfinite(normals).all():
                 raise ValueError(f"normals must be a finite array of the points' shape {points.shape}")
             normals = normals[first] / np.maximum(np.linalg.norm(normals[first], axis=1, keepdims=True), 1e-30)
+        if collinear(distinct):
+            raise ValueError(f"the {len(distinct)} distinct points lie on a line: a point cloud must sample a surface")
         center, scale = normalization(distinct)
         p = (distinct - center) / scale
         g = cloud_graph(p, self.config.points, normals)

@@ -196,8 +196,8 @@ def cloud_landmark_fields(points: np.ndarray, part: np.ndarray, k: int, seed: in
                           t_coef: float = CLOUD_T_COEF, normals: np.ndarray | None = None) -> LandmarkFields:
     """K farthest-point landmarks per part of the graph and their point-cloud heat-method distance fields
     (float32 (N, K)), as :func:`gegnn.landmarks.landmark_fields` on a mesh: deterministic for a given
-    cloud, ``k`` and ``seed``; parts of fewer than MIN_PART points get distance 0 (as a mesh's parts of
-    fewer than 3 vertices). ``normals``: the cloud's own oriented unit normals, if it has them (see
+    cloud, ``k`` and ``seed``; parts of fewer than MIN_PART points, or on a line, get distance 0 (as a
+    mesh's parts of fewer than 3 vertices). ``normals``: the cloud's own oriented unit normals, if it has them (see
     :func:`surface_neighbors`). The same as ``cloud_landmark_solver(points, part, t_coef, normals)(k, seed)``."""
     return cloud_landmark_solver(points, part, t_coef, normals)(k, seed)
 
@@ -212,7 +212,7 @@ def cloud_landmark_solver(points: np.ndarray, part: np.ndarray, t_coef: float = 
     n_parts = int(part.max()) + 1
     groups = label_groups(part, n_parts)
     builds = [_cloud_field(points[idx], t_coef, None if normals is None else normals[idx])
-              if len(idx) >= MIN_PART else None for idx in groups]
+              if len(idx) >= MIN_PART and not collinear(points[idx]) else None for idx in groups]
     solvers = {}
 
     def fields(k: int, seed: int = 0) -> LandmarkFields:
@@ -233,6 +233,14 @@ def cloud_landmark_solver(points: np.ndarray, part: np.ndarray, t_coef: float = 
             landmarks[c] = idx[chosen[cols]]
         return LandmarkFields(out, landmarks, part)
     return fields
+
+
+def collinear(points: np.ndarray) -> bool:
+    """Whether the points lie on one line (to 1e-9 of their extent): no surface, no local triangles (the
+    heat method's solvers fail on them)."""
+    centered = points - points.mean(axis=0)
+    s = np.linalg.svd(centered, compute_uv=False)
+    return bool(s[1] <= 1e-9 * s[0]) if len(s) > 1 else True
 
 
 def surface_neighbors(points: np.ndarray, k: int = HEAT_K, cone_deg: float = CONE_DEG,

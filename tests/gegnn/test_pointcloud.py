@@ -235,6 +235,30 @@ def test_a_part_too_small_for_the_heat_method_gets_no_fields():
     assert (lf.distances[500:] == 0).all() and (lf.distances[:500].max(axis=0) > 2.5).all()
 
 
+def test_a_part_on_a_line_gets_no_fields_and_a_cloud_on_a_line_is_refused(cloud_model, tmp_path):
+    """A straight wire beside a sphere has no surface: no fields (potpourri3d's solver raised a
+    GC_SAFETY_ASSERT on it); a cloud that is only a line is refused, by the CLI naming the file."""
+    from click.testing import CliRunner
+
+    from gegnn.cli import main
+
+    x = np.linspace(0, 1, 200)
+    line = np.stack([x, 2 * x, np.zeros_like(x)], axis=1)
+    p = np.concatenate([fibonacci_sphere(500), line + [3.0, 0, 0]])
+    g = cloud_graph(p, 8)
+    lf = cloud_landmark_fields(p, g.part, 4)
+    assert len(np.unique(g.part)) == 2
+    assert (lf.distances[500:] == 0).all() and (lf.distances[:500].max(axis=0) > 2.5).all()
+    with pytest.raises(ValueError, match="200 distinct points lie on a line"):
+        cloud_model.embed(line)
+    cloud_model.save(tmp_path / "cloud.safetensors")
+    np.savetxt(tmp_path / "wire.xyz", line)
+    result = CliRunner().invoke(main, ["query", str(tmp_path / "cloud.safetensors"), str(tmp_path / "wire.xyz"),
+                                       "--source", "0"])
+    assert result.exit_code == 1 and "wire.xyz: the 200 distinct points lie on a line" in result.output
+    assert "Traceback" not in result.output
+
+
 def test_mesh_commands_refuse_a_point_cloud_model(cloud_model, tmp_path):
     import trimesh
     from click.testing import CliRunner
