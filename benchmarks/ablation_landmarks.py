@@ -21,6 +21,7 @@ from gegnn.checkpoint import load_checkpoint
 from gegnn.data import GeodesicStore
 from gegnn.landmarks import landmark_fields
 from gegnn.train import METRIC_EPS, evaluate_store
+from machine import cpu_description  # benchmarks/ is on sys.path when a script there runs
 
 
 def bound_mre(store: GeodesicStore, k: int) -> float:
@@ -60,6 +61,7 @@ def main():
     ap.add_argument("val_store")
     ap.add_argument("runs")
     args = ap.parse_args()
+    print(f"CPU: {cpu_description()}", flush=True)
     store = GeodesicStore(args.val_store, "geodesic")
     lines = ["| variant | K | decoder reads | start | network steps | CPU min | val MRE |",
              "|---|---:|---|---|---:|---:|---:|"]

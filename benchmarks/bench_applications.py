@@ -34,6 +34,7 @@ from gegnn.finetune import finetune
 from gegnn.logmap import log_map, stencil, vector_heat_log_map
 from gegnn.query import exact_fields
 from gegnn.statistics import geodesic_and_euclidean_d2, histogram_l1, triangle_violations
+from machine import cpu_description  # benchmarks/ is on sys.path when a script there runs
 
 NORMALIZED_RADIUS = 0.3
 
@@ -196,6 +197,7 @@ def main():
     ap.add_argument("--biharmonic", help="checkpoint of a biharmonic model (default: the shipped one)")
     ap.add_argument("--biharmonic-png", help="its exact | predicted | error picture")
     args = ap.parse_args()
+    print(f"CPU: {cpu_description()}", flush=True)
     torch.set_num_threads(1)
     for name in args.only:
         t0 = time.perf_counter()

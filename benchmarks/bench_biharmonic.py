@@ -38,6 +38,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from geodata.biharmonic import biharmonic_pairs  # noqa: E402
 from geodata.examples import bumpy_sphere  # noqa: E402
 from geodata.mesh import Mesh, MeshError, vertex_components  # noqa: E402
+from machine import cpu_description  # benchmarks/ is on sys.path when a script there runs
 
 
 def load_mesh(path: str) -> Mesh:
@@ -104,6 +105,7 @@ def main() -> None:
     ap.add_argument("--threads", default="1")
     ap.add_argument("--repeat", type=int, default=3, help="best of this many runs of the exact method")
     args = ap.parse_args()
+    print(f"CPU: {cpu_description()}", flush=True)
 
     cases = [(f"synthetic-sphere-{args.vertices}", lambda: bumpy_sphere(args.vertices))]
     cases += [(Path(p).name, (lambda p=p: load_mesh(p))) for p in args.mesh]

@@ -29,7 +29,8 @@ from gegnn.decoders import SpectralDecoder
 from gegnn.spectral import spectral_codes
 from gegnn.train import METRIC_EPS
 
-from bench_results import cpu_description, timed  # benchmarks/ is on sys.path when a script there runs
+from bench_results import timed  # benchmarks/ is on sys.path when a script there runs
+from machine import cpu_description  # benchmarks/ is on sys.path when a script there runs
 
 
 def mre(pred, exact) -> float:

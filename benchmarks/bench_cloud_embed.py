@@ -22,7 +22,6 @@ from contextlib import contextmanager, nullcontext
 
 import numpy as np
 import torch
-from bench_results import cpu_description  # benchmarks/ is on sys.path when a script there runs
 
 import gegnn.cloud_heat as cloud_heat
 import gegnn.heat as heat
@@ -30,6 +29,7 @@ import gegnn.model
 import gegnn.pointcloud as pointcloud
 from geodata.examples import bumpy_sphere
 from gegnn import GeGnn, threads
+from machine import cpu_description  # benchmarks/ is on sys.path when a script there runs
 
 STEPS = [(pointcloud, "mls_project", "projection"), (pointcloud, "knn_edges", "k = 8 graph"),
          (pointcloud, "orient_normals", "normals' orientation (beside, before the U-Net)"),

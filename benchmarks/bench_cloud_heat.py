@@ -24,7 +24,7 @@ import numpy as np
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 from bench_gegnn import timed  # noqa: E402  (benchmarks/ is on sys.path when a script there runs)
-from bench_results import cpu_description  # noqa: E402
+from machine import cpu_description  # benchmarks/ is on sys.path when a script there runs
 from gegnn.cloud_heat import CloudHeatDistance  # noqa: E402
 from gegnn.landmarks import farthest_point_fields  # noqa: E402
 

@@ -22,6 +22,7 @@ from gegnn.embedding import Embedding
 from geodata.mesh import Mesh, unique_edges, vertex_normals
 from geodata.stages.normalize import normalize
 from gegnn.train import lr_at, train_step
+from machine import cpu_description  # benchmarks/ is on sys.path when a script there runs
 
 
 def torus_mesh():
@@ -119,6 +120,7 @@ def main():
     ap.add_argument("--skip-train", action="store_true")
     ap.add_argument("--threads", type=int, default=0, help="torch threads (0: torch's default)")
     args = ap.parse_args()
+    print(f"CPU: {cpu_description()}", flush=True)
     if args.threads:
         torch.set_num_threads(args.threads)  # on a shared machine, 1 thread avoids oversubscription stalls
     v, f = torus_mesh()

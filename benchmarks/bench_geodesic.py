@@ -25,6 +25,7 @@ from geodata.geodesic import BACKENDS, edge_flip_paths, geodesic_solver, polylin
 from geodata.mesh import Mesh, vertex_components
 from geodata.prepare import PrepareConfig, prepare_geometry
 from geodata.stages.load import load_mesh_bytes
+from machine import cpu_description  # benchmarks/ is on sys.path when a script there runs
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "meshes" / "train"
 DEFAULT = ["sweethome3d/armchair.obj", "sweethome3d/lamp.obj", "trimesh-models/featuretype.STL"]
@@ -86,6 +87,7 @@ def main():
     ap.add_argument("--sources", type=int, default=8, help="sources timed per mesh at ~5k vertices "
                                                           "(half at 20k, a quarter at 80k, at least 2)")
     args = ap.parse_args()
+    print(f"CPU: {cpu_description()}", flush=True)
     cases = []
     for i, name in enumerate(args.meshes):
         path = SHARED / name

@@ -20,6 +20,7 @@ import trimesh
 
 from gegnn import GeGnn
 from gegnn.train import relative_error, set_deterministic, train_step
+from machine import cpu_description  # benchmarks/ is on sys.path when a script there runs
 
 PAPER_EMBED_S, PAPER_QUERIES_S = 0.089, 0.042  # per mesh, per 1M queries; RTX 3090, 256 channels
 
@@ -118,6 +119,7 @@ def main():
     ap.add_argument("--queries", type=int, default=1_000_000)
     ap.add_argument("--steps", type=int, default=5)
     args = ap.parse_args()
+    print(f"CPU: {cpu_description()}", flush=True)
     device = torch.device(args.device)
     name = torch.cuda.get_device_name(device) if device.type == "cuda" else platform.processor() or platform.machine()
     print(f"## GeGnn on {name} (torch {torch.__version__}, CUDA {torch.version.cuda})")

@@ -22,7 +22,7 @@ import os
 import numpy as np
 import trimesh
 from bench_gegnn import timed  # benchmarks/ is on sys.path when a script there runs
-from bench_results import cpu_description
+from machine import cpu_description  # benchmarks/ is on sys.path when a script there runs
 
 from geodata.mesh import unique_edges
 from gegnn.heat import HeatDistance

@@ -29,9 +29,9 @@ import time
 
 import numpy as np
 import torch
-from bench_results import cpu_description  # benchmarks/ is on sys.path when a script there runs
 
 from gegnn import GeGnn
+from machine import cpu_description  # benchmarks/ is on sys.path when a script there runs
 from gegnn.data import GeodesicStore
 
 KINDS = ("clean", "noisy", "density", "2k", "surface", "normals")

@@ -37,7 +37,7 @@ from geodata.mesh import Mesh
 from geodata.surface_points import insert_points
 
 from bench_gegnn import heat_pairs, timed
-from bench_results import cpu_description
+from machine import cpu_description  # benchmarks/ is on sys.path when a script there runs
 
 
 def load(store, mesh_id):

@@ -28,6 +28,7 @@ from gegnn import GeGnn
 from gegnn.query import relative_errors
 
 from bench_applications import meshes  # benchmarks/ is on sys.path when a script there runs
+from machine import cpu_description  # benchmarks/ is on sys.path when a script there runs
 
 MODELS = ("landmark", "paper")
 
@@ -74,6 +75,7 @@ def main():
     ap.add_argument("--spheres", type=int, nargs="+", default=[1000, 2000, 5000, 10000, 20000, 50000, 100000])
     ap.add_argument("--out", help="PNG of MRE and seconds against vertex count")
     args = ap.parse_args()
+    print(f"CPU: {cpu_description()}", flush=True)
     torch.set_num_threads(1)
     models = {name: GeGnn.pretrained(name) for name in MODELS}
     rng = np.random.default_rng(0)

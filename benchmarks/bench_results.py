@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import sys
 from pathlib import Path
 
@@ -36,6 +35,7 @@ from gegnn.train import METRIC_EPS
 from geodata.mesh import unique_edges
 
 import bench_gegnn  # benchmarks/ is on sys.path when a script there runs
+from machine import cpu_description
 
 
 LANDMARKS = 64  # K of the bound-alone column when the model has no landmarks
@@ -214,14 +214,6 @@ BIHARMONIC_INTRO = (
     "spectral sum over the first m modes, a lower bound, with the mean time of its eigen-solve. `exact (s)`: "
     "the exact solver for the stored pairs (their ~40 sources x every vertex). Made by `python "
     "benchmarks/bench_biharmonic_model.py data/val.zarr --pure runs/bih-pure/best.safetensors --out FILE`.")
-
-
-def cpu_description() -> str:
-    """CPU model and whether it has AVX512-BF16 (bf16 matmuls ~3x fp32 there, emulated elsewhere)."""
-    info = Path("/proc/cpuinfo").read_text() if Path("/proc/cpuinfo").exists() else ""
-    model = next((line.split(":", 1)[1].strip() for line in info.splitlines() if line.startswith("model name")),
-                 platform.processor() or platform.machine())
-    return f"{model}, {'with' if 'avx512_bf16' in info else 'without'} AVX512-BF16"
 
 
 def write_report(path, args, rows, times, speedup, largest, grid_ids):

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import zarr
+from machine import cpu_description  # benchmarks/ is on sys.path when a script there runs
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "meshes" / "train"
 
@@ -34,6 +35,7 @@ def main():
     ap.add_argument("--jobs", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--backend", default="loky")
     args = ap.parse_args()
+    print(f"CPU: {cpu_description()}", flush=True)
     files = sorted((SHARED / "sweethome3d").glob("*.obj"))[:: max(1, 89 // args.meshes)][: args.meshes]
     with tempfile.TemporaryDirectory() as tmp:
         raw = Path(tmp) / "raw"

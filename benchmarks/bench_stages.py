@@ -23,6 +23,7 @@ sys.path.insert(0, str(ROOT))
 from geodata.mesh import Mesh, MeshError, closed_manifold_problem, component_volumes  # noqa: E402
 from geodata.stages.remesh import remesh, simplify  # noqa: E402
 from geodata.stages.watertight import watertight  # noqa: E402
+from machine import cpu_description  # benchmarks/ is on sys.path when a script there runs
 
 MESHES = ROOT.parent / "shared" / "meshes"
 DEFAULT = ["sweethome3d/chair.obj", "sweethome3d/floorUplight.obj", "sweethome3d/table.obj",
@@ -56,6 +57,7 @@ def main(argv=None) -> int:
     ap.add_argument("--target-vertices", type=int, default=5000)
     ap.add_argument("--collapse", type=float, default=0.15)
     args = ap.parse_args(argv)
+    print(f"CPU: {cpu_description()}", flush=True)
 
     if args.paths:
         paths = [Path(p) for p in args.paths]

@@ -30,6 +30,7 @@ from gegnn import GeGnn, GeGnnConfig
 from gegnn.data import BatchDataset, EpochSampler
 from gegnn.fields import LANDMARK_DRAWS, FieldCache, FieldSpec
 from gegnn.train import Dist, cpus_per_process, fill_field_cache, lr_at, make_loader, train_step
+from machine import cpu_description  # benchmarks/ is on sys.path when a script there runs
 
 
 def tori(n: int) -> dict:
@@ -86,6 +87,7 @@ def main():
     ap.add_argument("--channels", type=int, default=256)
     ap.add_argument("--steps", type=int, default=3)
     args = ap.parse_args()
+    print(f"CPU: {cpu_description()}", flush=True)
     workers = [int(w) for w in args.workers.split(",")]
     print(f"CPU: {platform.processor() or platform.machine()}, {os.cpu_count()} cores; torch {torch.__version__}; "
           f"{torch.get_num_threads()} threads; batch {args.batch_size} meshes of ~5k vertices, "

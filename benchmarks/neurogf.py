@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from machine import cpu_description  # benchmarks/ is on sys.path when a script there runs
 
 TRAIN_POINTS = 2048  # the ShapeNet13 training clouds
 
@@ -124,6 +125,7 @@ def main():
     ap.add_argument("repo")
     ap.add_argument("--sphere", action="store_true", required=True)
     args = ap.parse_args()
+    print(f"CPU: {cpu_description()}", flush=True)
     rng = np.random.default_rng(0)
     v = rng.normal(size=(TRAIN_POINTS, 3))
     v /= np.linalg.norm(v, axis=1, keepdims=True)
