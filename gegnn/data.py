@@ -6,6 +6,7 @@ loader worker makes it, so resumed, multi-worker and multi-process runs see iden
 from __future__ import annotations
 
 import hashlib
+from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property, partial
@@ -23,6 +24,7 @@ __all__ = ["GeodesicStore", "MeshGeometry", "Batch", "split_meshes", "epoch_batc
 
 DISTANCES = ("geodesic", "biharmonic")
 VAL_EPOCH = -1  # rng stream of the fixed validation sample
+GEOMETRY_CACHE = 64  # meshes a dataset keeps per process (every loader worker has its own)
 
 
 @dataclass
@@ -31,11 +33,14 @@ class MeshGeometry:
     normals: np.ndarray   # float32 (N, 3)
     edges: np.ndarray     # int64 (E, 2), undirected
     faces: np.ndarray     # int64 (F, 3)
+    derived_from: str | None = None  # a point cloud's: the key of the stored mesh its points were made from
 
     @cached_property
     def key(self) -> str:
-        """Content hash (:func:`gegnn.fields.geometry_key`), the field cache's key."""
-        return geometry_key(self.vertices, self.faces)
+        """The field cache's key: the content hash (:func:`gegnn.fields.geometry_key`) of the stored mesh,
+        for a point cloud the one its points were made from (so that every rank can tell duplicates
+        apart from the store alone)."""
+        return self.derived_from or geometry_key(self.vertices, self.faces)
 
 
 class GeodesicStore:
@@ -192,7 +197,7 @@ class BatchDataset(torch.utils.data.Dataset):
         self.num_pairs, self.rotate, self.fields, self.cloud = num_pairs, rotate, fields, cloud
         self.levels, self.sigma_c, self.sigma_n = levels, sigma_c, sigma_n
         self.field_cache = field_cache
-        self._store, self._geometries, self._cache = None, {}, None
+        self._store, self._geometries, self._cache = None, OrderedDict(), None
 
     @property
     def store(self) -> GeodesicStore:
@@ -219,17 +224,26 @@ class BatchDataset(torch.utils.data.Dataset):
         return 0 if epoch == VAL_EPOCH else int(rng.integers(self.fields.draws))
 
     def geometry(self, mesh_id: str) -> MeshGeometry:
-        """The mesh's geometry, kept: ~200 kB per 5k-vertex mesh; pairs (~7 MB) are read per use. For a
-        point-cloud model, the projected points, graph and normals of its vertices alone (faces kept: the
-        field cache's key)."""
-        if mesh_id not in self._geometries:
-            g = self.store.geometry(mesh_id)
-            if self.cloud:
-                from .pointcloud import cloud_graph
-                c = cloud_graph(g.vertices.astype(np.float64), self.cloud)
-                g = MeshGeometry(c.points.astype(np.float32), c.normals.astype(np.float32), c.edges, g.faces)
-            self._geometries[mesh_id] = g
+        """:meth:`load_geometry`, the last GEOMETRY_CACHE meshes kept (~200 kB per 5k-vertex mesh: the
+        validation meshes, seen every epoch, and small stores stay; a worker's memory stays bounded on a
+        large one). Pairs (~7 MB a mesh) are read per use."""
+        if mesh_id in self._geometries:
+            self._geometries.move_to_end(mesh_id)
+        else:
+            self._geometries[mesh_id] = self.load_geometry(mesh_id)
+            while len(self._geometries) > GEOMETRY_CACHE:
+                self._geometries.popitem(last=False)
         return self._geometries[mesh_id]
+
+    def load_geometry(self, mesh_id: str) -> MeshGeometry:
+        """The mesh's geometry as the model reads it: the stored mesh, or for a point-cloud model the
+        projected points, graph and normals of its vertices alone (faces kept; the stored mesh's key)."""
+        g = self.store.geometry(mesh_id)
+        if self.cloud:
+            from .pointcloud import cloud_graph
+            c = cloud_graph(g.vertices.astype(np.float64), self.cloud)
+            g = MeshGeometry(c.points.astype(np.float32), c.normals.astype(np.float32), c.edges, g.faces, g.key)
+        return g
 
     def mesh_fields(self, mesh_id: str, seed: int) -> np.ndarray:
         g = self.geometry(mesh_id)
@@ -242,7 +256,7 @@ class BatchDataset(torch.utils.data.Dataset):
         return self.fields.compute(g.vertices, g.faces, seed)
 
     def __getstate__(self):  # worker processes reopen the store themselves
-        return {**self.__dict__, "_store": None, "_geometries": {}, "_cache": None}
+        return {**self.__dict__, "_store": None, "_geometries": OrderedDict(), "_cache": None}
 
 
 class EpochSampler(torch.utils.data.Sampler):

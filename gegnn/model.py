@@ -95,6 +95,12 @@ class GeGnnConfig:
     def levels(self) -> int:
         return len(self.encoder_blocks)
 
+    @property
+    def reads_embeddings(self) -> bool:
+        """Whether the decoder reads the network's embeddings (the ablations --landmark-no-embedding and
+        --spectral-no-embedding decode the fields alone: the network then gets no gradient)."""
+        return not ((self.landmarks and not self.landmark_embedding) or (self.spectral and not self.spectral_embedding))
+
     def to_json(self) -> str:
         # inf (plain grid pooling) is written as the JSON extension Infinity, which json reads back.
         return json.dumps(dataclasses.asdict(self))

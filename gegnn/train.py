@@ -34,6 +34,7 @@ RESUME_KEEPS = ("epochs", "device", "workers", "field_cache", "landmark_cache")
 DECODER_KINDS = ("decoder", "landmark", "spectral")  # GeGnnConfig fields that choose the decoder (name prefixes)
 WARMUP_LR = 1e-3  # decoder warm-up: a small MLP on fixed codes (the network's --lr is usually lower)
 WARMUP_BYTES = 2 << 30  # decoder warm-up: codes and pairs kept on the device, per rank
+VAL_WORKERS = 2  # loader processes of validation, at most (each holds its meshes while training runs)
 MAX_AUTO_WORKERS = 8  # --workers auto on a GPU: one per spare CPU core, at most this many (docs/benchmarks.md)
 PROGRESS_EVERY = 25  # steps between progress-bar updates (each reads a loss from the device)
 # Collectives may wait this long: ranks meet after filling the field cache, whose shares can differ by many
@@ -423,14 +424,17 @@ def _train(cfg: TrainConfig, model_config, resume, run: Path, device, ctx: Dist)
         fill_field_cache(cache, spec, [(dataset, train_ids, range(spec.draws)), (val_dataset, val_ids, [0])],
                          ctx, device, log)
     workers = auto_workers(device) if cfg.workers is None else cfg.workers
-    val_loader = make_loader(val_dataset, single_mesh_keys(val_ids, ctx), workers, device)
+    # Validation runs once an epoch, on one mesh a batch: a few workers, kept between epochs, suffice.
+    val_loader = make_loader(val_dataset, single_mesh_keys(val_ids, ctx), min(workers, VAL_WORKERS), device)
     if cfg.decoder_warmup and start_epoch == 0:
         # A rank beyond the number of meshes borrows one: every rank must take part in the all-reduces.
         keys = single_mesh_keys(train_ids, ctx) or [(VAL_EPOCH, (train_ids[ctx.rank % len(train_ids)],))]
         warm_decoder(model, make_loader(dataset, keys, workers, device, persistent=False), cfg.decoder_warmup,
                      WARMUP_LR, device, log, ctx)
         log.info(f"after the decoder warm-up: val_mre {validate(model, val_loader, device, ctx):.4f}")
-    net = torch.nn.parallel.DistributedDataParallel(model) if ctx.world > 1 else model
+    # A decoder that reads no embeddings leaves the network without gradients: DDP must expect that.
+    net = torch.nn.parallel.DistributedDataParallel(
+        model, find_unused_parameters=not model.config.reads_embeddings) if ctx.world > 1 else model
     sampler = EpochSampler(train_ids, cfg.seed, cfg.batch_size, ctx.rank, ctx.world)
     loader = make_loader(dataset, sampler, workers, device)
     steps_per_epoch = len(sampler)
@@ -544,16 +548,24 @@ def single_mesh_keys(mesh_ids: list[str], ctx: Dist) -> list[tuple]:
 
 
 def fill_field_cache(path: str, spec: FieldSpec, work: list[tuple], ctx: Dist, device, log) -> None:
-    """Compute the fields that ``path`` lacks, for ``work``: (dataset, mesh ids, seeds) triples. Every
-    rank takes its share of the meshes and the CPU cores of its share of the node; the fields then
-    serve every loader worker and rank (:mod:`gegnn.fields`)."""
+    """Compute the fields that ``path`` lacks, for ``work``: (dataset, mesh ids, seeds) triples, keyed
+    as the datasets' loaders look them up. Every rank takes the meshes whose key falls to it (so two ids
+    of one content are one task, on one rank: no two ranks write one key) and the CPU cores of its share
+    of the node; the fields then serve every loader worker and rank (:mod:`gegnn.fields`)."""
     cache = FieldCache(path, spec)
     if ctx.main:
         cache.create()  # once, before the ranks write into it
     if ctx.world > 1:
         dist.barrier()
-    todo = [item for dataset, mesh_ids, seeds in work
-            for item in cache.missing((dataset.store.geometry(m) for m in mesh_ids[ctx.rank::ctx.world]), seeds)]
+    todo, seen = [], set()
+    for dataset, mesh_ids, seeds in work:
+        for m in mesh_ids:
+            key = dataset.store.geometry(m).key  # the stored mesh's: a point cloud's too
+            if key in seen or int(key, 16) % ctx.world != ctx.rank:
+                continue
+            seen.add(key)
+            if any(not cache.has(key, s) for s in seeds):
+                todo += cache.missing([dataset.load_geometry(m)], seeds)
     t0 = time.perf_counter()
     cache.fill(todo, jobs=cpus_per_process(), progress=ctx.main)
     total = all_sum([len(todo)], ctx, device)[0]

@@ -7,7 +7,7 @@ import torch
 from gegnn_stores import ellipsoid, small_config
 
 import gegnn.train as gtrain
-from gegnn import GeGnn
+from gegnn import Embedding, GeGnn
 from gegnn.data import Batch, BatchDataset
 from gegnn.decoders import DistanceDecoder, LandmarkDecoder
 from gegnn.fields import FieldCache, FieldSpec, geometry_key
@@ -86,6 +86,77 @@ def test_deterministic_mode_sets_the_cublas_workspace_wherever_it_is_turned_on(m
         assert __import__("os").environ["CUBLAS_WORKSPACE_CONFIG"] == ":4096:8"
     finally:
         torch.use_deterministic_algorithms(previous)
+
+
+def test_chunks_are_sized_by_the_device_the_codes_are_on():
+    """On a CPU, chunks that keep intermediates in cache; elsewhere (here the meta device stands for a GPU)
+    large ones, for pairs and for surface points alike: few launches."""
+    import gegnn.embedding as gemb
+
+    decoder = LandmarkDecoder(16, 4, 32)
+    cpu = gemb.Embedding(torch.zeros(10, 16 + 4 + 3), decoder)
+    gpu = gemb.Embedding(torch.zeros(10, 16 + 4 + 3, device="meta"), decoder)
+    assert cpu.chunk == max(1024, gemb.CHUNK_VALUES // decoder.pair_width(cpu.features))
+    assert gpu.chunk == gemb.ACCELERATOR_CHUNK_VALUES // decoder.pair_width(gpu.features)
+    assert cpu.surface_chunk == gemb.SURFACE_CHUNK and gpu.surface_chunk == gemb.ACCELERATOR_SURFACE_CHUNK
+    assert gpu.chunk > 50 * cpu.chunk and gpu.surface_chunk >= 16 * cpu.surface_chunk
+
+
+def test_indices_are_copied_asynchronously_only_towards_an_accelerator(monkeypatch):
+    """A device-to-host copy with non_blocking=True may still be in flight when the host reads it."""
+    seen = []
+    to = torch.Tensor.to
+
+    def recording_to(self, *args, **kwargs):
+        seen.append(kwargs.get("non_blocking", False))
+        return to(self, *args, **{k: v for k, v in kwargs.items() if k != "non_blocking"})
+    monkeypatch.setattr(torch.Tensor, "to", recording_to)
+    decoder = DistanceDecoder(4, 8)
+    for device, asynchronous in (("cpu", False), ("meta", True)):
+        emb = Embedding(torch.zeros(5, 4, device=device), decoder)
+        seen.clear()
+        emb._indices(torch.tensor([0, 1]))
+        assert seen == [asynchronous]
+
+
+def test_a_dataset_keeps_a_bounded_number_of_meshes(tiny_store, monkeypatch):
+    """Every loader worker keeps meshes it has read: the last GEOMETRY_CACHE, not every mesh of the store."""
+    import gegnn.data as gdata
+
+    monkeypatch.setattr(gdata, "GEOMETRY_CACHE", 2)
+    ds = BatchDataset(tiny_store, "geodesic", 0, 100, False, 5, 1 / 16, 3 / 16)
+    ids = ds.store.mesh_ids
+    for m in ids + ids[:1]:
+        ds.geometry(m)
+    assert list(ds._geometries) == [ids[-1], ids[0]]  # the most recent two
+    np.testing.assert_array_equal(ds.geometry(ids[0]).vertices, ds.store.geometry(ids[0]).vertices)
+
+
+def test_auto_workers_by_device_and_cores(monkeypatch):
+    """--workers auto: none on a CPU (the cores are the network's); on a GPU one per spare core of the
+    rank, at least one, at most MAX_AUTO_WORKERS."""
+    for cores, on_gpu in [(1, 1), (2, 1), (6, 5), (16, gtrain.MAX_AUTO_WORKERS), (64, gtrain.MAX_AUTO_WORKERS)]:
+        monkeypatch.setattr(gtrain, "cpus_per_process", lambda: cores)
+        assert gtrain.auto_workers(torch.device("cpu")) == 0
+        assert gtrain.auto_workers(torch.device("cuda")) == on_gpu
+    monkeypatch.undo()
+    monkeypatch.setenv("LOCAL_WORLD_SIZE", "4")
+    monkeypatch.setattr("os.sched_getaffinity", lambda pid: set(range(32)))
+    assert gtrain.cpus_per_process() == 8  # a node's cores shared by its ranks
+
+
+def test_validation_keeps_few_loader_workers(tiny_store, tmp_path, monkeypatch):
+    """Validation's loader workers persist all run long beside training's: at most VAL_WORKERS of them."""
+    made = []
+    make_loader = gtrain.make_loader
+
+    def recording(dataset, sampler, workers, device, persistent=True):
+        made.append(workers)
+        return make_loader(dataset, sampler, 0, device, persistent)  # build in-process: the count is the point
+    monkeypatch.setattr(gtrain, "make_loader", recording)
+    gtrain.train(gtrain.TrainConfig(store=tiny_store, run=str(tmp_path / "run"), epochs=1, batch_size=2,
+                                    pairs_per_mesh=100, workers=6), small_config())
+    assert made == [gtrain.VAL_WORKERS, 6]  # validation, then training
 
 
 # -- ScatterMax: ties share the gradient ---------------------------------------------------------------

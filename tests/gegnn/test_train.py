@@ -121,6 +121,16 @@ def _ddp_worker(rank, port, store, out):
         dist.destroy_process_group()
 
 
+def _free_ports(n):
+    sockets = [socket.socket() for _ in range(n)]
+    for s in sockets:
+        s.bind(("127.0.0.1", 0))
+    ports = [s.getsockname()[1] for s in sockets]
+    for s in sockets:
+        s.close()
+    return ports
+
+
 def _free_port():
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -142,3 +152,54 @@ def test_ddp_two_processes_average_gradients(tiny_store, tmp_path):
     assert all(torch.equal(decoders[0][k], decoders[1][k]) for k in decoders[0])
     log = (tmp_path / "lm" / "train.log").read_text()
     assert "decoder warm-up: 10 steps on 2 meshes' codes per process" in log and "epoch 0" in log
+
+
+# -- every model kind under DDP, as torchrun starts it: the trainer makes and ends the process group ---------
+KINDS = {"paper": ("geodesic", {}), "landmark": ("geodesic", {"landmarks": 4}),
+         "spectral": ("biharmonic", {"spectral": 4}),
+         "spectral-no-embedding": ("biharmonic", {"spectral": 4, "spectral_embedding": False}),
+         "points": ("geodesic", {"landmarks": 4, "points": 8})}
+
+
+def _ddp_kinds_worker(rank, ports, store, out):
+    import os
+
+    import torch.distributed as dist
+
+    import gegnn.fields
+
+    os.environ.update(MASTER_ADDR="127.0.0.1", RANK=str(rank), LOCAL_RANK=str(rank), WORLD_SIZE="2",
+                      LOCAL_WORLD_SIZE="2")
+    torch.set_num_threads(1)
+    # After the fill, the loader must read every field from the cache: computing one fails the run.
+    gegnn.fields.FieldSpec.compute = lambda *a, **k: (_ for _ in ()).throw(AssertionError("a field was computed"))
+    for port, (name, (distance, options)) in zip(ports, KINDS.items()):
+        os.environ["MASTER_PORT"] = str(port)  # a run of its own, as torchrun would start it
+        train(TrainConfig(store=store, run=str(Path(out) / name), epochs=2, batch_size=1, pairs_per_mesh=200,
+                          distance=distance, device="cpu", workers=0), small_config(**options))
+        assert not dist.is_initialized()  # the trainer made the group, and ended it
+
+
+def test_ddp_trains_every_model_kind_from_a_cache_both_ranks_filled(tmp_path):
+    """Two gloo processes, two epochs each (several steps: DDP raises on the second step where a parameter
+    got no gradient it did not expect), for the paper, landmark, spectral (with and without embeddings) and
+    point-cloud models; the store holds one mesh twice under two ids, which one rank computes once. The
+    loaders never compute a field (FieldSpec.compute raises in both ranks)."""
+    from gegnn_stores import FOUR_MESHES, write_store
+
+    from gegnn.data import GeodesicStore
+
+    store = write_store(tmp_path / "dup.zarr", {**FOUR_MESHES, "sphere_copy": FOUR_MESHES["sphere"]}, biharmonic=True)
+    mp.spawn(_ddp_kinds_worker, args=(_free_ports(len(KINDS)), store, str(tmp_path)), nprocs=2, join=True)
+    s = GeodesicStore(store)
+    train_ids, val_ids = gtrain.split_meshes(s.mesh_ids, 0.1)
+    train_keys = {s.geometry(m).key for m in train_ids}
+    val_keys = {s.geometry(m).key for m in val_ids} - train_keys
+    assert len(train_keys | val_keys) == 4  # the copy shares the sphere's key
+    for name, (_, options) in KINDS.items():
+        log = (tmp_path / name / "train.log").read_text()
+        assert "2 process(es)" in log and "epoch 1 " in log
+        if options.get("landmarks"):
+            assert f"landmark fields: {4 * len(train_keys) + len(val_keys)} computed" in log
+        elif options.get("spectral"):
+            assert f"spectral fields: {len(train_keys | val_keys)} computed" in log
