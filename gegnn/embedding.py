@@ -184,7 +184,7 @@ class Embedding:
         Returns:
             ``out``, filled.
         """
-        from tqdm.auto import tqdm
+        from geodata.progress import progress_bar
 
         rows = np.arange(self.num_vertices) if rows is None else np.asarray(rows, dtype=np.int64).reshape(-1)
         symmetric = cols is None or np.array_equal(rows, cols)
@@ -197,7 +197,7 @@ class Embedding:
             raise ValueError(f"out has shape {tuple(out.shape)}, the matrix {shape}")
         row_starts, col_starts = range(0, shape[0], tile), range(0, shape[1], tile)
         tiles = [(r, c) for r in row_starts for c in col_starts if not symmetric or c >= r]
-        with tqdm(total=sum(min(tile, shape[0] - r) * min(tile, shape[1] - c) for r, c in tiles), unit="pair",
+        with progress_bar(total=sum(min(tile, shape[0] - r) * min(tile, shape[1] - c) for r, c in tiles), unit="pair",
                   unit_scale=True, disable=not progress, desc="distance matrix") as bar:
             for r, c in tiles:
                 i, j = rows[r:r + tile], cols[c:c + tile]

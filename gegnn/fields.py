@@ -158,9 +158,9 @@ class FieldCache:
         The processes are spawned for this call and end with it: joblib's loky workers would idle on for
         5 minutes, and a torchrun or ``mp.spawn`` child cannot exit while they do. Each keeps to one thread;
         with ``jobs`` 1 the fields are computed here, on this process's threads."""
-        from tqdm import tqdm
+        from geodata.progress import progress_bar
 
-        bar = tqdm(total=len(todo), desc=f"{self.spec.kind} fields", leave=False, disable=not progress, dynamic_ncols=True)
+        bar = progress_bar(total=len(todo), desc=f"{self.spec.kind} fields", leave=False, disable=not progress, dynamic_ncols=True)
         meshes = {}  # the draws of one mesh in one task: its heat method set up once
         for key, vertices, faces, seed in todo:
             meshes.setdefault(key, (key, vertices, faces, []))[3].append(seed)

@@ -147,10 +147,10 @@ def heat_rows(mesh: Mesh, rows: np.ndarray, cols: np.ndarray, out, progress: boo
 
 
 def _by_row_blocks(solve, rows: np.ndarray, out, jobs: int, progress: bool, what: str) -> None:
-    from tqdm.auto import tqdm
+    from geodata.progress import progress_bar
 
     starts = iter(range(0, len(rows), ROW_BLOCK))
-    with ThreadPoolExecutor(jobs) as pool, tqdm(total=len(rows), unit="row", disable=not progress,
+    with ThreadPoolExecutor(jobs) as pool, progress_bar(total=len(rows), unit="row", disable=not progress,
                                                 desc=what) as bar:
         def submit(count):
             return (pool.submit(lambda s=s: (s, solve(rows[s:s + ROW_BLOCK]))) for s in islice(starts, count))

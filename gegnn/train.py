@@ -20,6 +20,8 @@ import torch
 import torch.distributed as dist
 from tqdm import tqdm
 
+from geodata.progress import progress_bar
+
 from .checkpoint import load_checkpoint, save_checkpoint
 from .data import VAL_EPOCH, BatchDataset, EpochSampler, GeodesicStore, split_meshes
 from .fields import FieldCache, FieldSpec
@@ -181,7 +183,7 @@ def train_epoch(model, loader, optimizer, cfg: TrainConfig, step: int, total: in
                 device, ctx: Dist) -> tuple[float, int]:
     model.train()
     losses = []
-    bar = tqdm(loader, desc="train", leave=False, disable=not ctx.main, dynamic_ncols=True)
+    bar = progress_bar(loader, desc="train", leave=False, disable=not ctx.main, dynamic_ncols=True)
     for batch in bar:
         losses.append(train_step(model, batch.to(device), optimizer, lr_at(step, total, cfg.lr, warmup),
                                  cfg.clip_grad, device))
@@ -226,7 +228,7 @@ def fit_pairs(params, loss_fn, n_pairs: int, steps: int, lr: float, pairs_per_st
     params = list(params)
     optimizer = torch.optim.AdamW(params, lr=lr, weight_decay=0.0)
     losses = []
-    bar = tqdm(range(steps), desc=desc, leave=False, disable=not progress, dynamic_ncols=True)
+    bar = progress_bar(range(steps), desc=desc, leave=False, disable=not progress, dynamic_ncols=True)
     for step in bar:
         for group in optimizer.param_groups:
             group["lr"] = lr * (1 - step / steps)
@@ -276,7 +278,7 @@ def warm_decoder(model, loader, steps: int, lr: float, device, log, ctx: Dist | 
     model.eval()
     codes, pairs, dists, offset, used = [], [], [], 0, 0
     with torch.no_grad():
-        for batch in tqdm(loader, desc="decoder warm-up: codes", leave=False, disable=not ctx.main,
+        for batch in progress_bar(loader, desc="decoder warm-up: codes", leave=False, disable=not ctx.main,
                           dynamic_ncols=True):
             batch = batch.to(device)
             z = model(batch.hierarchy, fields=batch.fields)
@@ -589,7 +591,7 @@ def evaluate_store(model: GeGnn, store_path, distance: str = "geodesic", mesh_id
                            model.config.sigma_c, model.config.sigma_n, FieldSpec.of(model.config),
                            cloud=model.config.points)
     rows = []
-    for mesh_id in tqdm(mesh_ids or dataset.store.mesh_ids, desc="eval", leave=False):
+    for mesh_id in progress_bar(mesh_ids or dataset.store.mesh_ids, desc="eval", leave=False):
         batch = dataset[(VAL_EPOCH, (mesh_id,))].to(device)
         e = model(batch.hierarchy, fields=batch.fields)
         err = pair_errors(model.distance, e, batch.pairs, batch.distances, chunk)

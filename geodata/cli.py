@@ -9,11 +9,12 @@ from pathlib import Path
 
 import click
 import numpy as np
-from tqdm.auto import tqdm
+from tqdm import tqdm
 
 from geodata import store
 from geodata.geodesic import BACKENDS as BACKENDS_GEODESIC
 from geodata.parallel import BACKENDS, in_shard, parallel_map, parse_shard
+from geodata.progress import progress_bar
 from geodata.subgroup import pending
 
 log = logging.getLogger("geodata")
@@ -162,7 +163,7 @@ def prepare(raw_dir, out, pairs, target_vertices, collapse, seed, geodesic_backe
 
 def _run(fn, tasks, what, jobs, backend, scheduler) -> list[dict]:
     rows, warned = [], set()
-    bar = tqdm(total=len(tasks), desc=what, unit="mesh", disable=None, dynamic_ncols=True)
+    bar = progress_bar(total=len(tasks), desc=what, unit="mesh", disable=None, dynamic_ncols=True)
     try:
         for row in parallel_map(fn, tasks, jobs, backend, scheduler):
             rows.append(row)
@@ -296,7 +297,7 @@ def augment(raw_dir, out_dir, variants, seed, jobs, include, exclude):
     sources = discover(raw_dir, include, exclude)
     rows = []
     calls = (delayed(augment_file)(str(base / s), s, out_dir, cfg) for s in sources)
-    for row in tqdm(Parallel(n_jobs=jobs, return_as="generator")(calls), total=len(sources), desc="augment",
+    for row in progress_bar(Parallel(n_jobs=jobs, return_as="generator")(calls), total=len(sources), desc="augment",
                     unit="file", disable=None, dynamic_ncols=True):
         rows.append(row)
         if row["status"] != "ok":
