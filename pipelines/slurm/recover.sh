@@ -7,15 +7,30 @@
 set -euo pipefail
 (( $# >= 1 )) || { echo "usage: recover.sh JOB [JOB...] (the chain's job ids, in order)" >&2; exit 2; }
 jobs=("$@")
-state() { scontrol -o show job "$1" 2>/dev/null || true; }
+states() { scontrol -o show job "$1" 2>/dev/null | grep -oE "JobState=[A-Z_]+" | sort -u || true; }
+stuck() { scontrol -o show job "$1" 2>/dev/null | grep -q "Reason=DependencyNeverSatisfied"; }
 for i in "${!jobs[@]}"; do
     job=${jobs[$i]}
     next=${jobs[$((i + 1))]:-}
-    if state "$job" | grep -qE "JobState=(FAILED|CANCELLED|TIMEOUT|NODE_FAIL|OUT_OF_MEMORY|BOOT_FAIL|DEADLINE)" \
-        || { [ -n "$next" ] && state "$next" | grep -q "Reason=DependencyNeverSatisfied"; }; then
+    if states "$job" | grep -qvE "JobState=(COMPLETED|PENDING|RUNNING|CONFIGURING|COMPLETING|REQUEUED)" \
+        || { [ -n "$next" ] && stuck "$next" && [ "$(states "$job")" != "JobState=COMPLETED" ]; }; then
         scontrol requeue "$job" && echo "requeued $job"
+        # Release what waits on it only once it is queued again: a dependency checked while the job is
+        # being requeued counts its tasks as failed once more.
+        for _ in $(seq 60); do
+            [ "$(states "$job")" = "JobState=PENDING" ] && break
+            sleep 1
+        done
     fi
-    if (( i > 0 )) && state "$job" | grep -q "Reason=DependencyNeverSatisfied"; then
-        scontrol update JobId="$job" Dependency="afterok:${jobs[$((i - 1))]}" && echo "released $job"
+    if (( i > 0 )) && stuck "$job"; then
+        prev=${jobs[$((i - 1))]}
+        # afterok on an array id stays failed once any task failed, even after the task succeeds on a
+        # requeue: wait on each task instead, or on nothing where they all completed.
+        tasks=$(squeue -h -r -t all -j "$prev" -o %i 2>/dev/null | paste -sd: || true)
+        if [ "$(states "$prev")" = "JobState=COMPLETED" ] || [ -z "$tasks" ]; then
+            scontrol update JobId="$job" Dependency= && echo "released $job"
+        else
+            scontrol update JobId="$job" Dependency="afterok:$tasks" && echo "released $job"
+        fi
     fi
 done
