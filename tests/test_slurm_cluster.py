@@ -69,7 +69,12 @@ def test_the_chain_with_a_cancelled_shard_recovered_then_two_training_jobs(clust
          "--biharmonic", "--pairs 3000", "--train", "--epochs 2 --channels 16 --pairs-per-mesh 2000",
          "--sbatch", SITE], cwd=tmp_path, env=env, capture_output=True, text=True, check=True).stdout
     prepare, biharmonic, train = re.search(r"prepare (\d+) -> biharmonic (\d+) -> train (\d+)", submitted).groups()
-    subprocess.run(["scancel", f"{prepare}_1"], check=True)  # a shard lost (cancelled): the chain is stuck
+    t0 = time.time()  # a shard lost while it runs (cancelled, as a node failure would): the chain is stuck
+    while "RUNNING" not in subprocess.run(["squeue", "-h", "-j", f"{prepare}_1", "-o", "%T"], capture_output=True,
+                                          text=True).stdout:
+        assert time.time() - t0 < 300, "shard 1 never started"
+        time.sleep(0.5)
+    subprocess.run(["scancel", f"{prepare}_1"], check=True)
     t0 = time.time()
     while "DependencyNeverSatisfied" not in subprocess.run(["scontrol", "-o", "show", "job", biharmonic],
                                                            capture_output=True, text=True).stdout:
