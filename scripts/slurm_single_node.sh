@@ -5,6 +5,7 @@
 #   scripts/slurm_single_node.sh start      (idempotent: the node is up and idle when it returns)
 #   scripts/slurm_single_node.sh stop
 set -euo pipefail
+export PATH="$PATH:/usr/sbin:/sbin"  # the daemons, where a user's PATH lacks them
 conf=/etc/slurm/slurm.conf
 state=/var/spool/slurm-single
 case ${1:-start} in

@@ -22,7 +22,8 @@ SITE = "--cpus-per-task=1 --mem=1500M"  # the site's resource flags: this node h
 @pytest.fixture(scope="module")
 def cluster():
     why = None
-    if not shutil.which("slurmctld") or not shutil.which("munged"):
+    path = f"{os.environ.get('PATH', '')}:/usr/sbin:/sbin"  # the daemons live in sbin
+    if not shutil.which("slurmctld", path=path) or not shutil.which("munged", path=path):
         why = "slurm-wlm and munge are not installed (apt-get install slurm-wlm munge)"
     elif os.geteuid() != 0:
         why = "starting SLURM's daemons needs root"
