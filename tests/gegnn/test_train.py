@@ -75,6 +75,35 @@ def test_init_starts_from_weights(tiny_store, tmp_path):
     assert got == small_config(distance="biharmonic") and len(rows) == 1
 
 
+def test_init_weights_are_the_starting_point(tiny_store, tmp_path):
+    """--init: every tensor of the checkpoint is the new model's starting value; a landmark decoder on a
+    paper model's network keeps the network's tensors and starts its own decoder fresh."""
+    train(config(tiny_store, tmp_path / "a", epochs=1), small_config())
+    ckpt = load_checkpoint(tmp_path / "a" / "best.safetensors")
+    same = TrainConfig(store=tiny_store, run=str(tmp_path / "b"), init=str(tmp_path / "a" / "best.safetensors"))
+    model = gtrain.build_model(same, small_config(channels=8), None, torch.device("cpu"))[0]
+    state = model.state_dict()
+    assert state.keys() == ckpt.model_state.keys()
+    assert all(torch.equal(state[k], ckpt.model_state[k].to(state[k].dtype)) for k in state)
+    torch.manual_seed(1)
+    landmark = gtrain.build_model(same, small_config(landmarks=4), None, torch.device("cpu"))[0].state_dict()
+    network = [k for k in landmark if not k.startswith("distance.")]
+    assert network and all(torch.equal(landmark[k], ckpt.model_state[k].to(landmark[k].dtype)) for k in network)
+    assert all(k not in ckpt.model_state or landmark[k].shape != ckpt.model_state[k].shape
+               or not torch.equal(landmark[k], ckpt.model_state[k]) for k in landmark if k.startswith("distance."))
+
+
+def test_the_schedule_at_known_steps():
+    """Linear warm-up to the peak, then (1 - step / total)^0.9 down to 0 at the last step."""
+    base, total, warmup = 1e-3, 100, 10
+    assert gtrain.lr_at(0, total, base, warmup) == pytest.approx(1e-4)
+    assert gtrain.lr_at(4, total, base, warmup) == pytest.approx(5e-4)
+    assert gtrain.lr_at(9, total, base, warmup) == pytest.approx(1e-3)
+    assert gtrain.lr_at(10, total, base, warmup) == pytest.approx(1e-3 * 0.9 ** 0.9)
+    assert gtrain.lr_at(50, total, base, warmup) == pytest.approx(1e-3 * 0.5 ** 0.9)
+    assert gtrain.lr_at(100, total, base, warmup) == 0.0 and gtrain.lr_at(0, total, base, 0) == base
+
+
 def test_separate_validation_store(tiny_store, one_mesh_store, tmp_path):
     """--val: train on every mesh of the store, validate on every mesh of the other one."""
     rows = train(config(tiny_store, tmp_path / "v", epochs=1, val_store=one_mesh_store), small_config())

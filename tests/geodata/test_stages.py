@@ -317,3 +317,46 @@ def test_all_train_meshes(rel):
     inp = load(rel)
     _, _, out = pipeline(inp)
     assert_valid(out, TARGET)
+
+
+# -- outputs pinned to their inputs by independent properties -------------------------------------------------
+def test_normalize_is_one_uniform_scale_and_translation_of_its_input():
+    """The stored mesh is s * v + t of its input (one s for all axes, every vertex: none moved on its own),
+    rounded to float32; its bounding box centered, its longest half-extent exactly 1."""
+    from geodata.stages.normalize import normalize
+
+    rng = np.random.default_rng(0)
+    m = trimesh.creation.icosphere(3)
+    rotation = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+    v = (np.asarray(m.vertices) * [3.0, 1.2, 0.7]) @ rotation.T * 37.5 + [100.0, -3.0, 5.0]
+    out = normalize(Mesh(v, np.asarray(m.faces)))
+    n = out.vertices.astype(np.float64)
+    assert np.array_equal(n, n.astype(np.float32)) and np.array_equal(out.faces, m.faces)  # float32 values
+    # least squares for (s, t_x, t_y, t_z) over all 3N coordinates
+    rows = np.zeros((3 * len(v), 4))
+    rows[:, 0] = v.ravel()
+    for axis in range(3):
+        rows[axis::3, 1 + axis] = 1
+    (s, *t), *_ = np.linalg.lstsq(rows, n.ravel(), rcond=None)
+    assert np.abs(n - (s * v + t)).max() < 2e-7  # float32 rounding of coordinates up to 1
+    half = (n.max(axis=0) - n.min(axis=0)) / 2
+    assert half.max() == 1.0 and np.abs(n.max(axis=0) + n.min(axis=0)).max() < 2e-7
+    assert s == pytest.approx(1 / ((v.max(axis=0) - v.min(axis=0)).max() / 2), rel=1e-6)
+
+
+def test_remesh_and_simplify_stay_on_the_input_surface():
+    """Both ways within 1% of the bounding-box diagonal (Hausdorff, sampled): the remeshed and simplified
+    surface is the input's, at about the vertex count asked for."""
+    box = trimesh.creation.box(extents=(2.0, 1.0, 0.5))
+    m = trimesh.util.concatenate([box, trimesh.creation.icosphere(3, radius=0.4).apply_translation((1.0, 0, 0.5))])
+    inp = watertight(Mesh(m.vertices, m.faces))
+    out = simplify(remesh(inp, 2000))
+    assert_valid(out)
+    assert 1600 < len(out.vertices) < 2400
+    diagonal = np.linalg.norm(inp.vertices.max(axis=0) - inp.vertices.min(axis=0))
+    for source, target in ((inp, out), (out, inp)):
+        surface = trimesh.Trimesh(source.vertices, source.faces, process=False)
+        points = np.concatenate([source.vertices, surface.sample(5000, seed=0)])
+        squared = igl.point_mesh_squared_distance(points, np.asarray(target.vertices, dtype=np.float64),
+                                                  np.asarray(target.faces, dtype=np.int64))[0]
+        assert np.sqrt(squared.max()) < 0.01 * diagonal
