@@ -224,26 +224,26 @@ class BatchDataset(torch.utils.data.Dataset):
         return 0 if epoch == VAL_EPOCH else int(rng.integers(self.fields.draws))
 
     def geometry(self, mesh_id: str) -> MeshGeometry:
-        """:meth:`load_geometry`, the last GEOMETRY_CACHE meshes kept (~200 kB per 5k-vertex mesh: the
+        """The mesh's geometry as the model reads it (:meth:`as_input`), the last GEOMETRY_CACHE meshes kept (~200 kB per 5k-vertex mesh: the
         validation meshes, seen every epoch, and small stores stay; a worker's memory stays bounded on a
         large one). Pairs (~7 MB a mesh) are read per use."""
         if mesh_id in self._geometries:
             self._geometries.move_to_end(mesh_id)
         else:
-            self._geometries[mesh_id] = self.load_geometry(mesh_id)
+            self._geometries[mesh_id] = self.as_input(self.store.geometry(mesh_id))
             while len(self._geometries) > GEOMETRY_CACHE:
                 self._geometries.popitem(last=False)
         return self._geometries[mesh_id]
 
-    def load_geometry(self, mesh_id: str) -> MeshGeometry:
-        """The mesh's geometry as the model reads it: the stored mesh, or for a point-cloud model the
-        projected points, graph and normals of its vertices alone (faces kept; the stored mesh's key)."""
-        g = self.store.geometry(mesh_id)
-        if self.cloud:
-            from .pointcloud import cloud_graph
-            c = cloud_graph(g.vertices.astype(np.float64), self.cloud)
-            g = MeshGeometry(c.points.astype(np.float32), c.normals.astype(np.float32), c.edges, g.faces, g.key)
-        return g
+    def as_input(self, stored: MeshGeometry) -> MeshGeometry:
+        """A stored mesh's geometry as the model reads it: itself, or for a point-cloud model the projected
+        points, graph and normals of its vertices alone (faces kept; the stored mesh's key)."""
+        if not self.cloud:
+            return stored
+        from .pointcloud import cloud_graph
+        c = cloud_graph(stored.vertices.astype(np.float64), self.cloud)
+        return MeshGeometry(c.points.astype(np.float32), c.normals.astype(np.float32), c.edges, stored.faces,
+                            stored.key)
 
     def mesh_fields(self, mesh_id: str, seed: int) -> np.ndarray:
         g = self.geometry(mesh_id)

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import hashlib
 import multiprocessing
-from collections.abc import Iterable
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 
@@ -145,11 +144,6 @@ class FieldCache:
                                        chunks=fields.shape, overwrite=True)
         array[:] = fields
         array.attrs["complete"] = True
-
-    def missing(self, meshes: Iterable, seeds) -> list:
-        """The ``(key, vertices, faces, seed)`` of ``meshes`` (objects with ``key``, ``vertices``,
-        ``faces``, as :class:`gegnn.data.MeshGeometry`) not yet cached."""
-        return [(g.key, g.vertices, g.faces, s) for g in meshes for s in seeds if not self.has(g.key, s)]
 
     def fill(self, todo: list, jobs: int = 1, progress: bool = True) -> None:
         """Compute and store the fields of every ``(key, vertices, faces, seed)`` in ``todo`` with ``jobs``

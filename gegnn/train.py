@@ -562,12 +562,15 @@ def fill_field_cache(path: str, spec: FieldSpec, work: list[tuple], ctx: Dist, d
     todo, seen = [], set()
     for dataset, mesh_ids, seeds in work:
         for m in mesh_ids:
-            key = dataset.store.geometry(m).key  # the stored mesh's: a point cloud's too
+            stored = dataset.store.geometry(m)
+            key = stored.key  # the stored mesh's: a point cloud's too
             if key in seen or int(key, 16) % ctx.world != ctx.rank:
                 continue
             seen.add(key)
-            if any(not cache.has(key, s) for s in seeds):
-                todo += cache.missing([dataset.load_geometry(m)], seeds)
+            lacking = [s for s in seeds if not cache.has(key, s)]
+            if lacking:
+                g = dataset.as_input(stored)
+                todo += [(key, g.vertices, g.faces, s) for s in lacking]
     t0 = time.perf_counter()
     cache.fill(todo, jobs=cpus_per_process(), progress=ctx.main)
     total = all_sum([len(todo)], ctx, device)[0]
