@@ -49,9 +49,10 @@ class Embedding:
         self.faces = None if faces is None else np.asarray(faces, dtype=np.int64)
         self._topology = None
         self.decoder, self.scale = decoder, float(scale)
-        values = CHUNK_VALUES if self.features.device.type == "cpu" else ACCELERATOR_CHUNK_VALUES
+        on_cpu = self.features.device.type == "cpu"
+        values = CHUNK_VALUES if on_cpu else ACCELERATOR_CHUNK_VALUES
         self.chunk = chunk or max(1024, values // decoder.pair_width(self.features))
-        self.surface_chunk = SURFACE_CHUNK if self.features.device.type == "cpu" else ACCELERATOR_SURFACE_CHUNK
+        self.surface_chunk = SURFACE_CHUNK if on_cpu else ACCELERATOR_SURFACE_CHUNK
         self.precision = _precision.resolve(precision, self.features.device)
         self.dtype = _precision.DTYPES[self.precision]
         self._layers = self._decoder_layers()
