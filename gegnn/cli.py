@@ -115,7 +115,8 @@ def _blocks(ctx, param, value):
 @click.option("--landmarks", default=0, show_default=True,
               help="Landmark-guided model: K farthest-point landmark distance fields per mesh (heat method) "
                    "bound the decoder (0: the paper's model). With --init from a paper model, its network "
-                   "is kept and the landmark decoder starts fresh.")
+                   "is kept and the landmark decoder starts fresh; from a landmark model with another K, "
+                   "its decoder is kept too (its weights do not depend on K).")
 @click.option("--landmark-no-embedding", is_flag=True, help="Ablation: the decoder reads landmarks only.")
 @click.option("--landmark-no-euclidean", is_flag=True, help="Ablation: drop the straight-line distance input.")
 @click.option("--spectral", default=0, show_default=True, metavar="M",

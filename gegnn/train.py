@@ -475,7 +475,8 @@ def build_model(cfg: TrainConfig, model_config, resume, device, log=None):
     With ``--init`` the network is the checkpoint's; where ``model_config`` asks for a decoder of its own
     (landmarks, spectral modes or the Euclidean decoder), its decoder options replace the checkpoint's,
     so a paper model's weights can start a landmark-guided or a biharmonic one (the new decoder starts
-    fresh)."""
+    fresh). A landmark decoder is kept for another K: its features are means and extremes over the
+    landmarks, its weights the same for any K."""
     if resume is not None:
         model_config = resume.config
     elif cfg.init:
@@ -494,7 +495,11 @@ def build_model(cfg: TrainConfig, model_config, resume, device, log=None):
     model = GeGnn(model_config)
     if cfg.init and resume is None:
         state = init.model_state
+        # The same decoder reads other inputs: another distance, points instead of meshes, or (its
+        # weights do not depend on K) another number of landmarks.
         same_input = dict(distance=init.config.distance, points=init.config.points)
+        if model_config.landmarks and init.config.landmarks:
+            same_input["landmarks"] = init.config.landmarks
         if dataclasses.replace(model_config, **same_input) != init.config:
             # another decoder: none of the old one's weights
             state = {k: v for k, v in state.items() if not k.startswith("distance.")}

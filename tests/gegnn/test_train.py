@@ -93,6 +93,27 @@ def test_init_weights_are_the_starting_point(tiny_store, tmp_path):
                or not torch.equal(landmark[k], ckpt.model_state[k]) for k in landmark if k.startswith("distance."))
 
 
+def test_init_keeps_a_landmark_decoder_for_another_k(tiny_store, tmp_path):
+    """--init from a K = 4 landmark model with --landmarks 8: every tensor, the decoder's included, is the
+    checkpoint's (its weights do not depend on K); another decoder form (interval) starts its own."""
+    torch.manual_seed(0)
+    k4 = GeGnn(small_config(landmarks=4))
+    with torch.no_grad():  # a decoder unlike a fresh one (whose last layer is zero)
+        for p in k4.distance.parameters():
+            p.normal_()
+    k4.save(tmp_path / "k4.safetensors")
+    init = TrainConfig(store=tiny_store, run=str(tmp_path / "b"), init=str(tmp_path / "k4.safetensors"))
+    k8 = gtrain.build_model(init, small_config(landmarks=8), None, torch.device("cpu"))[0]
+    assert k8.config == small_config(landmarks=8)
+    ckpt = load_checkpoint(tmp_path / "k4.safetensors").model_state
+    assert k8.state_dict().keys() == ckpt.keys()
+    assert all(torch.equal(v, ckpt[k].to(v.dtype)) for k, v in k8.state_dict().items())
+    interval = gtrain.build_model(init, small_config(landmarks=8, landmark_output="interval"), None,
+                                  torch.device("cpu"))[0].state_dict()
+    decoder = [k for k in interval if k.startswith("distance.") and k.endswith("weight")]
+    assert decoder and not any(torch.equal(interval[k], ckpt[k].to(interval[k].dtype)) for k in decoder)
+
+
 def test_the_schedule_at_known_steps():
     """Linear warm-up to the peak, then (1 - step / total)^0.9 down to 0 at the last step."""
     base, total, warmup = 1e-3, 100, 10
