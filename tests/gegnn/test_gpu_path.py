@@ -10,7 +10,7 @@ import gegnn.train as gtrain
 from gegnn import Embedding, GeGnn
 from gegnn.data import Batch, BatchDataset
 from gegnn.decoders import DistanceDecoder, LandmarkDecoder
-from gegnn.fields import FieldCache, FieldSpec, geometry_key
+from gegnn.fields import LANDMARK_DRAWS, FieldCache, FieldSpec, geometry_key
 from gegnn.landmarks import landmark_fields
 from gegnn.nn import aggregate, scatter_count
 
@@ -284,9 +284,15 @@ def test_training_fills_the_landmark_cache_and_workers_only_read_it(tiny_store, 
     cache = FieldCache(tmp_path / "run" / "fields.zarr", FieldSpec("landmark", 4))
     ds = BatchDataset(tiny_store, "geodesic", 0, 200, True, 5, 1 / 16, 3 / 16, cache.spec, str(cache.path))
     train_ids, val_ids = gtrain.split_meshes(ds.store.mesh_ids, cfg.val_fraction)
-    g = ds.store.geometry(train_ids[0])
-    np.testing.assert_array_equal(cache.get(geometry_key(g.vertices, g.faces), 3),
-                                  landmark_fields(g.vertices, g.faces, 4, 3).distances)
+    # every training mesh's every draw is its own: the landmark fields of that mesh with that seed
+    drawn = {}
+    for mesh_id in train_ids:
+        g = ds.store.geometry(mesh_id)
+        draws = [cache.get(geometry_key(g.vertices, g.faces), seed) for seed in range(LANDMARK_DRAWS)]
+        for seed, fields in enumerate(draws):
+            np.testing.assert_array_equal(fields, landmark_fields(g.vertices, g.faces, 4, seed).distances)
+        assert all(not np.array_equal(a, b) for k, a in enumerate(draws) for b in draws[k + 1:])
+        drawn[mesh_id] = draws
 
     def no_compute(*args, **kwargs):
         raise AssertionError("a landmark field was computed, not read from the cache")
@@ -296,7 +302,10 @@ def test_training_fills_the_landmark_cache_and_workers_only_read_it(tiny_store, 
         for mesh_id in train_ids + [(-1, m) for m in val_ids]:
             if isinstance(mesh_id, tuple):  # validation meshes: seed 0 only
                 epoch, mesh_id = mesh_id
-            assert ds.sample(epoch, mesh_id).fields.shape[1] == 4
+            fields = ds.sample(epoch, mesh_id).fields
+            assert fields.shape[1] == 4
+            if epoch >= 0:  # a training sample reads one of its mesh's draws
+                assert any(np.array_equal(fields, d) for d in drawn[mesh_id])
     log = (tmp_path / "run" / "train.log").read_text()
     assert f"landmark fields: {4 * len(train_ids) + len(val_ids)} computed" in log  # 4 draws; val: seed 0
     cache_again = gtrain.TrainConfig(**{**cfg.__dict__, "run": str(tmp_path / "run2"),
