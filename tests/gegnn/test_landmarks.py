@@ -87,6 +87,28 @@ def test_decoder_invariant_to_landmark_order_symmetric_zero_on_diagonal(output):
     assert (dec(codes[i], codes[j])[i != j] > 0).all()
 
 
+def test_point_codes_blend_the_corners_and_take_the_nearest_landmark_of_the_blend():
+    """A point inside a face: embedding, fields and position are sum_k b_k (corner k's), written out by
+    hand; the nearest-landmark distance is the minimum of the blended fields, not the blend of the
+    corners' minima (they differ here: each corner is nearest another landmark)."""
+    d, k = 2, 3
+    dec = LandmarkDecoder(d, k, 8)
+    e = torch.tensor([[1.0, 0.0], [0.0, 2.0], [4.0, 4.0]])
+    f = torch.tensor([[0.0, 3.0, 3.0], [3.0, 0.0, 3.0], [3.0, 3.0, 1.0]])
+    pos = torch.tensor([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    corners = LandmarkDecoder.codes(e, f, pos).unsqueeze(0)
+    bary = torch.tensor([[0.5, 0.25, 0.25]])
+    got = dec.point_codes(corners, bary)[0]
+    blended_f = [0.5 * 0 + 0.25 * 3 + 0.25 * 3, 0.5 * 3 + 0.25 * 0 + 0.25 * 3, 0.5 * 3 + 0.25 * 3 + 0.25 * 1]
+    expected = [0.5 * 1 + 0.25 * 0 + 0.25 * 4, 0.5 * 0 + 0.25 * 2 + 0.25 * 4,   # embedding
+                *blended_f,                                                        # 1.5, 2.25, 2.5
+                1.5,                                                               # min of the blend (blend of the minima: 0.25)
+                0.25, 0.25, 0.0]                                                   # position
+    torch.testing.assert_close(got, torch.tensor(expected))
+    on_corner = dec.point_codes(corners, torch.tensor([[0.0, 1.0, 0.0]]))[0]
+    torch.testing.assert_close(on_corner, corners[0, 1])  # a corner's own code
+
+
 def test_fields_are_deterministic_and_within_one_component():
     a, fa = ellipsoid(subdivisions=2)
     b, fb = ellipsoid((0.3, 0.3, 0.3), subdivisions=1)
