@@ -61,7 +61,7 @@ DEV = Path(__file__).resolve().parents[3] / "shared" / "meshes" / "dev"
 Z_UP = {"common-3d-test-models/nefertiti.obj", "common-3d-test-models/horse.ply", "milianw-scivi/buddha.obj",
         "milianw-scivi/dragon.obj"}  # judged by eye; every other development mesh is y-up, but these:
 NO_UP = {"libigl-tutorial-data/bumpy-cube.obj", "libigl-tutorial-data/arm.obj", "odedstein-meshes/hand_closed.obj"}
-MISSED = {"common-3d-test-models/igea.ply"}  # a head without a base, called z-up
+MISSED = {"common-3d-test-models/igea.ply"}  # y-up by eye; a head without a base, called z-up
 Z_TO_Y = np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]])  # (x, y, z) -> (x, z, -y): a z-up mesh written y-up
 
 
@@ -83,22 +83,24 @@ def test_a_flat_mesh_is_seen_face_on():
     assert up_axis(v[:, [0, 2, 1]], f) == "+z"  # in the xz plane
 
 
+def development_meshes():
+    """Every development mesh that has an up by eye, the miss marked as an expected (strict) failure."""
+    names = sorted(f"{p.parent.name}/{p.name}" for p in DEV.glob("*/*.*")) if DEV.exists() else []
+    return [pytest.param(n, marks=pytest.mark.xfail(strict=True, reason="a head without a base: its stance "
+                                                   "says z-up")) if n in MISSED else n
+            for n in names if n not in NO_UP]
+
+
 @pytest.mark.skipif(not DEV.exists(), reason="../shared/meshes not available")
-def test_up_axis_of_the_development_meshes():
-    """As the files come, and Lucy (y-up here) turned z-up as Stanford's scan is."""
+@pytest.mark.parametrize("name", development_meshes())
+def test_up_axis_of_the_development_meshes(name):
+    """As the files come, by eye; and Lucy (y-up here) turned z-up as Stanford's scan is."""
     from geodata.stages.load import load_mesh_file
 
-    wrong = []
-    for path in sorted(DEV.glob("*/*.*")):
-        name = f"{path.parent.name}/{path.name}"
-        if name in NO_UP:
-            continue
-        mesh, _ = load_mesh_file(path)
-        if up_axis(mesh.vertices, mesh.faces) != ("+z" if name in Z_UP else "+y"):
-            wrong.append(name)
-        if name == "continuous-remeshing/lucy.obj":
-            assert up_axis(mesh.vertices @ Z_TO_Y, mesh.faces) == "+z"
-    assert wrong == sorted(MISSED)
+    mesh, _ = load_mesh_file(DEV / name)
+    if name == "continuous-remeshing/lucy.obj":
+        assert up_axis(mesh.vertices @ Z_TO_Y, mesh.faces) == "+z"
+    assert up_axis(mesh.vertices, mesh.faces) == ("+z" if name in Z_UP else "+y")
 
 
 @pytest.mark.parametrize("up", ["+y", "+z", "-x"])
