@@ -1,6 +1,6 @@
 """The zarr v3 store: one group per mesh, committed by writing its status mark last.
 
-Layout (a contract, see docs/store.md):
+Layout (a contract, docs/store.md):
     OUT/meshes/<mesh_id>/{vertices, faces, normals, edges, geodesic/{pairs,distances}, biharmonic/...}
     OUT/failed/<mesh_id>   attrs only: source, stage, error
 Many processes may write one store at once: each writes only its own mesh groups, and the shared

@@ -1,4 +1,6 @@
 """Shared fixtures: a small raw folder (example soups + every kind of bad file) and its reference store."""
+import importlib.metadata
+
 import pytest
 from storetools import BAD, GOOD, prepare
 
@@ -25,3 +27,14 @@ def reference(raw, tmp_path_factory):
     return out, result.output
 
 
+
+
+# The release of potpourri3d that tests/gegnn/test_landmarks.py, test_cloud_heat.py and test_pointcloud.py
+# compare with (fields to 1e-9, normals and triangles bit for bit); pyproject.toml pins its minor version.
+POTPOURRI3D_COMPARED = "1.4.0"
+
+
+def pytest_report_header(config):
+    installed = importlib.metadata.version("potpourri3d")
+    note = "" if installed == POTPOURRI3D_COMPARED else " (another release: comparisons with it may differ)"
+    return f"potpourri3d {installed}, compared with {POTPOURRI3D_COMPARED}{note}"
