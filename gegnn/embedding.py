@@ -34,8 +34,9 @@ class Embedding:
             intermediates stay in cache (landmark model, 1M queries: 0.25 s against 0.31 s with 7384
             and 0.27 s with 16384). On a GPU 128M values (342k pairs of 196-d codes): 1M queries in 3
             chunks, where the CPU's size would launch thousands of kernels.
-        vertices, faces: the embedded mesh in its own units (:meth:`gegnn.GeGnn.embed` passes them):
-            needed by the geometric queries, :meth:`path` and :meth:`log_map`.
+        vertices: the embedded mesh's vertices in its own units (:meth:`gegnn.GeGnn.embed` passes them
+            and ``faces``): needed by the geometric queries, :meth:`path` and :meth:`log_map`.
+        faces: the embedded mesh's faces.
         part: for a point cloud, the part of every point (N,): the connected components of the neighbour
             graph it was embedded on (distances between parts mean nothing); None for a mesh.
     """
@@ -59,6 +60,7 @@ class Embedding:
 
     @property
     def num_vertices(self) -> int:
+        """Number of embedded vertices (points, for a cloud)."""
         return self.features.shape[0]
 
     def distance(self, i, j):
@@ -175,7 +177,8 @@ class Embedding:
         and 0 on the diagonal (as :meth:`distance`, whose values every entry equals).
 
         Args:
-            rows, cols: vertex indices (default: every vertex; ``cols`` defaults to ``rows``).
+            rows: vertex indices (default: every vertex).
+            cols: vertex indices (default: ``rows``).
             dtype: of the result; float16 halves the size (relative rounding 5e-4, far below the
                 model's error) and raises if a distance exceeds its range (65504).
             out: where to write (shape (len(rows), len(cols))); default a new NumPy array.

@@ -93,6 +93,7 @@ class GeGnnConfig:
 
     @property
     def levels(self) -> int:
+        """Pooling levels of the U-Net (one per entry of ``encoder_blocks``)."""
         return len(self.encoder_blocks)
 
     @property
@@ -102,19 +103,21 @@ class GeGnnConfig:
         return not ((self.landmarks and not self.landmark_embedding) or (self.spectral and not self.spectral_embedding))
 
     def to_json(self) -> str:
+        """The config as JSON (checkpoints keep it in their metadata)."""
         # inf (plain grid pooling) is written as the JSON extension Infinity, which json reads back.
         return json.dumps(dataclasses.asdict(self))
 
     @classmethod
     def from_json(cls, text: str) -> "GeGnnConfig":
+        """The config of :meth:`to_json`'s text."""
         return cls(**json.loads(text))
 
 
 class GeGnn(nn.Module):
     """Graph U-Net over a GeoPool hierarchy; ``GeGnn()`` is the paper's default network.
 
-    ``forward(hierarchy)`` returns per-vertex embeddings; ``predict`` adds the distance decoder;
-    ``embed(vertices, faces)`` runs the whole pipeline on one raw mesh.
+    ``forward(hierarchy)`` returns per-vertex codes, ``forward(hierarchy, pairs)`` the decoded distances
+    of the pairs; ``embed(vertices, faces)`` runs the whole pipeline on one raw mesh.
     """
 
     def __init__(self, config: GeGnnConfig | None = None):

@@ -39,10 +39,12 @@ class Mesh:
 
     @property
     def n_vertices(self) -> int:
+        """Number of vertices."""
         return len(self.vertices)
 
     @property
     def n_faces(self) -> int:
+        """Number of faces."""
         return len(self.faces)
 
 

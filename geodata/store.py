@@ -1,8 +1,10 @@
 """The zarr v3 store: one group per mesh, committed by writing its status mark last.
 
-Layout (a contract, docs/store.md):
+Layout (a contract, docs/store.md)::
+
     OUT/meshes/<mesh_id>/{vertices, faces, normals, edges, geodesic/{pairs,distances}, biharmonic/...}
     OUT/failed/<mesh_id>   attrs only: source, stage, error
+
 Many processes may write one store at once: each writes only its own mesh groups, and the shared
 parents are created once, before any worker starts (concurrent creation races, zarr-python#1435).
 """
@@ -61,6 +63,7 @@ def _open_or_create_root(out: str, attrs: dict, attempts: int = 50) -> zarr.Grou
 
 
 def open_store(out: str | Path) -> zarr.Group:
+    """Open an existing store read-only; StoreError where OUT is missing or not a geodata store."""
     try:
         root = zarr.open_group(str(out), mode="r")
     except (FileNotFoundError, zarr.errors.GroupNotFoundError):
@@ -103,11 +106,13 @@ def commit(out: str | Path, path: str) -> None:
 
 
 def record_failure(out: str | Path, mesh_id: str, source: str, stage: str, error: str) -> None:
+    """Record why a mesh failed (failed/<mesh_id>, attrs only: source, stage, one-line error)."""
     zarr.open_group(f"{out}/failed/{mesh_id}", mode="w",
                     attributes={"source": source, "stage": stage, "error": error})
 
 
 def clear_failure(out: str | Path, mesh_id: str) -> None:
+    """Forget a recorded failure (before a retry)."""
     root = zarr.open_group(str(out), mode="r+")
     if f"failed/{mesh_id}" in root:
         del root[f"failed/{mesh_id}"]
@@ -127,6 +132,7 @@ def list_meshes(out: str | Path) -> dict[str, dict | None]:
 
 
 def list_failures(out: str | Path) -> dict[str, dict]:
+    """The recorded failures: mesh id -> {source, stage, error}."""
     out = str(out)
     failures = {mesh_id: group_attrs(out, f"failed/{mesh_id}") for mesh_id in _children(out, "failed")}
     return {k: v for k, v in failures.items() if v is not None}
