@@ -21,7 +21,7 @@ import numpy as np
 import zarr
 
 from gegnn import GeGnn
-from gegnn.train import evaluate_store
+from gegnn.training.loop import evaluate_store
 
 from bench_gegnn import heat_pairs, timed  # benchmarks/ is on sys.path when a script there runs
 from machine import cpu_description

@@ -18,9 +18,10 @@ import numpy as np
 
 from gegnn import GeGnn
 from gegnn.checkpoint import load_checkpoint
-from gegnn.data import GeodesicStore
-from gegnn.landmarks import landmark_fields
-from gegnn.train import METRIC_EPS, evaluate_store
+from gegnn.training.data import GeodesicStore
+from gegnn.fields.landmarks import landmark_fields
+from gegnn.metrics import METRIC_EPS
+from gegnn.training.loop import evaluate_store
 from machine import cpu_description  # benchmarks/ is on sys.path when a script there runs
 
 

@@ -29,11 +29,11 @@ import torch
 from geodata.geodesic import edge_flip_paths, polyline_length
 from geodata.mesh import Mesh
 from gegnn import GeGnn
-from gegnn.data import GeodesicStore
+from gegnn.training.data import GeodesicStore
 from gegnn.finetune import finetune
-from gegnn.logmap import log_map, stencil, vector_heat_log_map
-from gegnn.query import exact_fields
-from gegnn.statistics import geodesic_and_euclidean_d2, histogram_l1, triangle_violations
+from gegnn.queries.logmap import log_map, stencil, vector_heat_log_map
+from gegnn.fields.exact import exact_fields
+from gegnn.queries.statistics import geodesic_and_euclidean_d2, histogram_l1, triangle_violations
 from machine import cpu_description  # benchmarks/ is on sys.path when a script there runs
 
 NORMALIZED_RADIUS = 0.3
@@ -160,7 +160,7 @@ def bench_d2(store, n, out, angle=np.pi):
 def bench_biharmonic(store, n, out, checkpoint=None, picture=None):
     """Exact | predicted | relative error of the biharmonic distance from one source on three meshes."""
     from geodata.biharmonic import biharmonic_distances
-    from gegnn.render import Panel, Row, save_panels
+    from gegnn.pictures.render import Panel, Row, save_panels
 
     model = GeGnn.from_checkpoint(checkpoint) if checkpoint else GeGnn.pretrained("biharmonic")
     rows = []

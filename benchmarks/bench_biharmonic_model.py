@@ -24,10 +24,10 @@ import torch
 from geodata.biharmonic import biharmonic_distances
 from geodata.mesh import Mesh
 from gegnn import GeGnn
-from gegnn.data import GeodesicStore
+from gegnn.training.data import GeodesicStore
 from gegnn.decoders import SpectralDecoder
-from gegnn.spectral import spectral_codes
-from gegnn.train import METRIC_EPS
+from gegnn.fields.spectral import spectral_codes
+from gegnn.metrics import METRIC_EPS
 
 from bench_results import timed  # benchmarks/ is on sys.path when a script there runs
 from machine import cpu_description  # benchmarks/ is on sys.path when a script there runs

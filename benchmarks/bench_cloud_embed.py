@@ -23,10 +23,10 @@ from contextlib import contextmanager, nullcontext
 import numpy as np
 import torch
 
-import gegnn.cloud_heat as cloud_heat
-import gegnn.heat as heat
+import gegnn.fields.cloud_heat as cloud_heat
+import gegnn.fields.heat as heat
 import gegnn.model
-import gegnn.pointcloud as pointcloud
+import gegnn.fields.pointcloud as pointcloud
 from geodata.examples import bumpy_sphere
 from gegnn import GeGnn, threads
 from machine import cpu_description  # benchmarks/ is on sys.path when a script there runs

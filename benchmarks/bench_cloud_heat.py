@@ -1,4 +1,4 @@
-"""Point-cloud heat distances: gegnn.cloud_heat against potpourri3d's PointCloudHeatSolver (the reference,
+"""Point-cloud heat distances: gegnn.fields.cloud_heat against potpourri3d's PointCloudHeatSolver (the reference,
 timed in the same run), on the validation clouds (each mesh's vertices) and on a bumpy_sphere(8000) cloud.
 
     python benchmarks/bench_cloud_heat.py [--store data/val.zarr] [--sources 16] [--landmarks 128]
@@ -25,8 +25,8 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 from bench_gegnn import timed  # noqa: E402  (benchmarks/ is on sys.path when a script there runs)
 from machine import cpu_description  # benchmarks/ is on sys.path when a script there runs
-from gegnn.cloud_heat import CloudHeatDistance  # noqa: E402
-from gegnn.landmarks import farthest_point_fields  # noqa: E402
+from gegnn.fields.cloud_heat import CloudHeatDistance  # noqa: E402
+from gegnn.fields.landmarks import farthest_point_fields  # noqa: E402
 
 
 def lower_bound_quality(fields: np.ndarray, pairs: np.ndarray, dist: np.ndarray) -> tuple[float, float]:
@@ -118,7 +118,7 @@ def main():
     print(f"{cpu_description()}, {os.cpu_count()} cores visible, OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS')}")
     print(f"potpourri3d {version('potpourri3d')}; times: ours / potpourri3d")
     if os.path.isdir(args.store):
-        from gegnn.data import GeodesicStore
+        from gegnn.training.data import GeodesicStore
 
         store = GeodesicStore(args.store)
         rows = []

@@ -17,11 +17,11 @@ import torch
 import trimesh
 
 from gegnn import GeGnn, GeGnnConfig
-from gegnn.data import BatchDataset
-from gegnn.embedding import Embedding
+from gegnn.training.data import BatchDataset
+from gegnn.queries.embedding import Embedding
 from geodata.mesh import Mesh, unique_edges, vertex_normals
 from geodata.stages.normalize import normalize
-from gegnn.train import lr_at, train_step
+from gegnn.training.loop import lr_at, train_step
 from machine import cpu_description  # benchmarks/ is on sys.path when a script there runs
 
 

@@ -19,7 +19,9 @@ import torch
 import trimesh
 
 from gegnn import GeGnn
-from gegnn.train import relative_error, set_deterministic, train_step
+from gegnn.metrics import relative_error
+from gegnn.training.devices import set_deterministic
+from gegnn.training.loop import train_step
 from machine import cpu_description  # benchmarks/ is on sys.path when a script there runs
 
 PAPER_EMBED_S, PAPER_QUERIES_S = 0.089, 0.042  # per mesh, per 1M queries; RTX 3090, 256 channels
@@ -86,7 +88,7 @@ def section_agreement(model, v, f, device, n):
 def section_training(v, f, device, steps):
     """One training step of the paper network (256 channels, 4 copies of the mesh, 100k pairs each):
     default, and under torch's deterministic algorithms (gegnn train --deterministic)."""
-    from gegnn.data import MeshGeometry, make_batch, sample_mesh
+    from gegnn.training.data import MeshGeometry, make_batch, sample_mesh
     from geodata.mesh import Mesh, unique_edges, vertex_normals
     from geodata.stages.normalize import normalize
 

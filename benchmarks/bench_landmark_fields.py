@@ -1,5 +1,5 @@
 """Landmark fields (K farthest-point landmarks and their heat-method distance fields) on CPU: potpourri3d's
-solver against gegnn.heat, exact sequential farthest-point sampling and a batched variant.
+solver against gegnn.fields.heat, exact sequential farthest-point sampling and a batched variant.
 
     python benchmarks/bench_landmark_fields.py [MESH_DIR] [--k 128] [--batch 8 16] [--repeat 3]
 
@@ -25,9 +25,9 @@ from bench_gegnn import timed  # benchmarks/ is on sys.path when a script there 
 from machine import cpu_description  # benchmarks/ is on sys.path when a script there runs
 
 from geodata.mesh import unique_edges
-from gegnn.heat import HeatDistance
-from gegnn.landmarks import (T_COEF, _farthest, farthest_point_fields, graph_farthest_points, landmark_columns,
-                             landmark_fields)
+from gegnn.fields.heat import HeatDistance
+from gegnn.fields.landmarks import (T_COEF, _farthest, farthest_point_fields, graph_farthest_points, landmark_columns,
+                                    landmark_fields)
 
 DRAGON = "data/val.zarr/meshes/dragon-4af53808"
 
@@ -109,7 +109,7 @@ def bench_mesh(name, v, f, k, batches, repeat):
     radius, mean_near = covering_radius(ours)
     print(f"\n{name}: {len(v)} vertices, {len(f)} faces, K = {k}; {solver.n_flips} intrinsic flips (cover)")
     rows = [("potpourri3d fields, sequential FPS (reference)", ref_s, f"{ref_s / k * 1e3:.2f} ms a field"),
-            ("gegnn.heat fields, sequential FPS", ours_s,
+            ("gegnn.fields.heat fields, sequential FPS", ours_s,
              f"{ref_s / ours_s:.2f}x; same landmarks: {ours_lm == ref_lm}; max |diff| / max d: {diff:.1e} "
              f"(float32), {diff64:.1e} (float64, 8 fields)"),
             ("  of which setup (cover, flips, two factorizations)", setup_s, ""),

@@ -15,7 +15,7 @@ moves the points, not the answer. Compared: the point-cloud model (``--model``),
 heat method (``PointCloudHeatSolver``, one field per source), and the shipped mesh model on the mesh itself
 (the same for every kind), and with ``--neurogf REPO`` NeuroGF's generalizable model from a checkout of its
 repository (benchmarks/neurogf.py). ``--oracle`` adds the exact geodesic between the cloud points' closest
-points on the mesh (``gegnn.query.exact_at_points``, read linearly inside the faces): what an answer knowing
+points on the mesh (``gegnn.fields.exact.exact_at_points``, read linearly inside the faces): what an answer knowing
 the surface exactly gives from these points, 0 on clouds of the vertices and on noisy ones the error that
 the noise itself leaves, since it moves a point along the surface as much as off it. MRE is the training metric, |d - exact| / (exact + 1e-3), averaged over pairs,
 then over meshes. One torch thread; embed = the whole precomputation of a cloud (graph, normals, landmark
@@ -32,7 +32,7 @@ import torch
 
 from gegnn import GeGnn
 from machine import cpu_description  # benchmarks/ is on sys.path when a script there runs
-from gegnn.data import GeodesicStore
+from gegnn.training.data import GeodesicStore
 
 KINDS = ("clean", "noisy", "density", "2k", "surface", "normals")
 NOISE = 0.005       # of the longest bounding-box side
@@ -78,7 +78,7 @@ def heat_method(points: np.ndarray, pairs: np.ndarray) -> np.ndarray:
 
 def exact_between(g, points: np.ndarray, pairs: np.ndarray) -> np.ndarray:
     """Exact geodesic distances between the closest mesh points of ``points[pairs]`` (one field a source)."""
-    from gegnn.query import exact_at_points
+    from gegnn.fields.exact import exact_at_points
     from geodata.mesh import Mesh
 
     mesh = Mesh(np.asarray(g.vertices, dtype=np.float64), np.asarray(g.faces, dtype=np.int64))

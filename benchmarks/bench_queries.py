@@ -29,9 +29,9 @@ import zarr
 
 from gegnn import GeGnn
 from gegnn.decoders import PairDecoder
-from gegnn.embedding import Embedding
-from gegnn.landmarks import landmark_fields
-from gegnn.train import METRIC_EPS
+from gegnn.queries.embedding import Embedding
+from gegnn.fields.landmarks import landmark_fields
+from gegnn.metrics import METRIC_EPS
 from geodata.geodesic import geodesic_solver
 from geodata.mesh import Mesh
 from geodata.surface_points import insert_points

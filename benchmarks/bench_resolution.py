@@ -25,7 +25,7 @@ import torch
 from geodata.geodesic import geodesic_solver
 from geodata.mesh import Mesh
 from gegnn import GeGnn
-from gegnn.query import relative_errors
+from gegnn.queries.files import relative_errors
 
 from bench_applications import meshes  # benchmarks/ is on sys.path when a script there runs
 from machine import cpu_description  # benchmarks/ is on sys.path when a script there runs

@@ -28,10 +28,10 @@ import numpy as np
 import torch
 
 from gegnn import Embedding, GeGnn
-from gegnn.data import GeodesicStore
-from gegnn.landmarks import landmark_fields
-from gegnn.render import Panel, Row, save_panels
-from gegnn.train import METRIC_EPS
+from gegnn.training.data import GeodesicStore
+from gegnn.fields.landmarks import landmark_fields
+from gegnn.pictures.render import Panel, Row, save_panels
+from gegnn.metrics import METRIC_EPS
 from geodata.mesh import unique_edges
 
 import bench_gegnn  # benchmarks/ is on sys.path when a script there runs
@@ -272,7 +272,7 @@ def write_report(path, args, rows, times, speedup, largest, grid_ids):
         lines += ["", "## Triangle inequality", "",
                   "A learned distance is not a metric by construction (the paper's limitations). Per mesh, 64 "
                   "random vertices and all their triples (400k samples); a triple violates the inequality when "
-                  "d(p, q) > d(p, x) + d(x, q) by more than 1e-6 relative (`gegnn.statistics.triangle_violations`"
+                  "d(p, q) > d(p, x) + d(x, q) by more than 1e-6 relative (`gegnn.queries.statistics.triangle_violations`"
                   "; `python benchmarks/bench_applications.py data/val.zarr --only triangle --triangle-md FILE`).",
                   "", Path(args.triangle).read_text().strip()]
     if args.biharmonic:

@@ -6,7 +6,7 @@ loader processes, the model's step time on this machine, and the loader processe
 
 Runs on synthetic 5,000-vertex tori in a temporary store (600k stored pairs each, Euclidean stand-in
 distances: only throughput matters). Three loaders: the paper's model (no landmarks); a landmark model
-reading its fields from the cache training fills first (gegnn.fields); and, as the reference,
+reading its fields from the cache training fills first (gegnn.fields.cache); and, as the reference,
 a landmark model computing its fields per draw (what a worker did at every new draw before the cache).
 The step time is measured on CUDA where there is one, else on this CPU; the GPU step used for the
 loader processes needed is then --gpu-step-ms (an estimate, labelled so).
@@ -27,9 +27,11 @@ import trimesh
 
 from bench_gegnn import write_store  # benchmarks/ is on sys.path when a script there runs
 from gegnn import GeGnn, GeGnnConfig
-from gegnn.data import BatchDataset, EpochSampler
-from gegnn.fields import LANDMARK_DRAWS, FieldCache, FieldSpec
-from gegnn.train import Dist, cpus_per_process, fill_field_cache, lr_at, make_loader, train_step
+from gegnn.training.data import BatchDataset, EpochSampler
+from gegnn.fields.cache import LANDMARK_DRAWS, FieldCache, FieldSpec
+from gegnn.distributed import Dist
+from gegnn.training.devices import cpus_per_process
+from gegnn.training.loop import fill_field_cache, lr_at, make_loader, train_step
 from machine import cpu_description  # benchmarks/ is on sys.path when a script there runs
 
 

@@ -13,7 +13,7 @@ from pathlib import Path
 import torch
 from safetensors.torch import load_file, save_file
 
-from .model import GeGnnConfig
+from .config import GeGnnConfig
 
 __all__ = ["Checkpoint", "save_checkpoint", "load_checkpoint"]
 

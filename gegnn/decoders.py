@@ -1,7 +1,7 @@
 r"""Pair decoders: per-vertex codes of two vertices to their distance.
 
 Every decoder splits into ``inputs`` (the symmetric pair features and what the output needs) and
-``output`` (the MLP's value to a distance), so :class:`gegnn.embedding.Embedding` can run the MLP in its
+``output`` (the MLP's value to a distance), so :class:`gegnn.queries.embedding.Embedding` can run the MLP in its
 own fast path between the two; ``pair_inputs`` is ``inputs`` of pairs of rows of a code table (fused into
 one pass for the landmark decoder on a CPU).
 """
@@ -12,8 +12,8 @@ import contextlib
 import torch
 from torch import Tensor, nn
 
+from .fields.spectral import weyl_shape, weyl_table
 from .nn import cpu_inference
-from .spectral import weyl_shape, weyl_table
 
 __all__ = ["PairDecoder", "DistanceDecoder", "LandmarkDecoder", "SpectralDecoder", "MLP", "mlp"]
 
@@ -23,7 +23,7 @@ MAX_LOG_RATIO = 5.0  # a ratio decoder never predicts more than e^5 = 148 times 
 class MLP(nn.Sequential):
     """Layers in sequence, the last one in fp32 whatever the autocast: it is a dot product, so fp32 costs
     nothing, and a bf16 output would round every distance to 2^-8 relative (0.4%), a floor on the error
-    of a model near 1% (the same split as :meth:`gegnn.embedding.Embedding._decode`)."""
+    of a model near 1% (the same split as :meth:`gegnn.queries.embedding.Embedding._decode`)."""
 
     def forward(self, x: Tensor) -> Tensor:
         *hidden, last = self
@@ -211,7 +211,7 @@ class LandmarkDecoder(PairDecoder):
 
 class SpectralDecoder(PairDecoder):
     r"""Biharmonic distance from truncated spectral codes, their Weyl-law tail and the embeddings
-    (biharmonic GeGnn; :mod:`gegnn.spectral` derives the tail).
+    (biharmonic GeGnn; :mod:`gegnn.fields.spectral` derives the tail).
 
     With :math:`d_m^2 = \sum_{k \le m} (s_k(i) - s_k(j))^2` (a lower bound), the tail scale
     :math:`\tau` and :math:`w = \tau F(r / \sqrt{2\pi\tau})` the Weyl estimate of the rest:
@@ -249,7 +249,7 @@ class SpectralDecoder(PairDecoder):
     @staticmethod
     def codes(embeddings: Tensor, spectral: Tensor, positions: Tensor) -> Tensor:
         """Per-vertex codes ``[e | s | tau | p]`` (N, D + m + 4) in fp32 (``spectral``: (N, m + 1), as
-        :func:`gegnn.spectral.spectral_codes`)."""
+        :func:`gegnn.fields.spectral.spectral_codes`)."""
         return torch.cat([embeddings.float(), spectral.float(), positions.float()], dim=1)
 
     def inputs(self, a: Tensor, b: Tensor) -> tuple[Tensor, tuple[Tensor, Tensor]]:

@@ -27,7 +27,8 @@ from functools import partial
 import numpy as np
 import torch
 
-from .train import fit_pairs, pair_errors, relative_error
+from .fitting import fit_pairs
+from .metrics import pair_errors, relative_error
 
 __all__ = ["FinetuneResult", "finetune", "split_sources"]
 
@@ -74,7 +75,7 @@ def finetune(model, vertices, faces, sources: int = 64, held_out: int = 8, steps
     """
     from geodata.mesh import Mesh
 
-    from .query import exact_fields, largest_part
+    from .fields.exact import exact_fields, largest_part
 
     t0 = time.perf_counter()
     device = next(model.parameters()).device

@@ -3,11 +3,8 @@ ACM TOG 2023): one forward pass gives an embedding per vertex; a small MLP decod
 to a distance."""
 from __future__ import annotations
 
-import dataclasses
-import json
 from collections.abc import Callable
 from contextlib import nullcontext
-from dataclasses import dataclass
 
 import numpy as np
 import torch
@@ -16,8 +13,9 @@ from torch import Tensor, nn
 from geodata.mesh import Mesh, unique_edges, vertex_normals
 from geodata.stages.normalize import normalization
 
+from .config import GeGnnConfig
 from .decoders import DistanceDecoder, LandmarkDecoder, SpectralDecoder
-from .fields import FieldSpec
+from .fields.cache import FieldSpec
 from .graph import Graph, directed_edges
 from .nn import GeoConv, GeoPool, GeoUnpool, Hierarchy, ResBlocks, build_hierarchy
 from .precision import resolve
@@ -32,85 +30,6 @@ PRETRAINED = {
     "biharmonic": "gegnn-biharmonic-v1.safetensors",  # biharmonic distances: spectral codes + Weyl tail
     "points": "gegnn-points-v1.safetensors",      # point clouds: the landmark model's weights on a kNN graph
 }
-
-
-@dataclass(frozen=True)
-class GeGnnConfig:
-    """Everything needed to rebuild a GeGnn; stored as JSON beside the weights in every checkpoint.
-
-    The defaults are the paper's network (the authors' public code for block counts and GroupNorm).
-    The flags below the first group switch on the paper's ablations.
-    """
-
-    in_channels: int = 6                      # normalized xyz + unit normal
-    channels: int = 256                       # width of every GeoConv
-    embed_dim: int = 256                      # per-vertex embedding
-    encoder_blocks: tuple[int, ...] = (2, 3, 3, 3, 2)  # ResBlocks after each of the pooling levels
-    decoder_blocks: tuple[int, ...] = (2, 3, 3, 3, 2)  # ResBlocks after each unpooling
-    groups: int = 4                           # GroupNorm groups
-    decoder_hidden: int = 256                 # distance MLP: embed_dim -> hidden -> hidden -> 1
-    sigma_c: float = 1 / 16                   # GeoPool cell size in xyz at the first level
-    sigma_n: float = 3 / 16                   # ... in normal space; inf = plain grid pooling
-    # Ablations
-    aggr: str = "max"                         # "max" | "mean" | "sum"
-    relative_position: bool = True            # v_i - v_j in GeoConv
-    edge_length: bool = True                  # |v_i - v_j| in GeoConv
-    decoder: str = "mlp"                      # "mlp" | "euclidean" (distance = ||e_i - e_j||)
-    # Landmark guidance (this project's extension; 0 = the paper's model): K landmark distance fields
-    # per component, decoded together with the embeddings by a LandmarkDecoder.
-    landmarks: int = 0
-    landmark_embedding: bool = True           # the decoder reads the embedding difference
-    landmark_euclidean: bool = True           # ... and the straight-line distance
-    landmark_output: str = "ratio"            # "ratio": d = L exp(MLP); "interval": d = L + (U - L) sigmoid(MLP)
-    # Biharmonic distances (0 = none): m truncated spectral modes per component and their Weyl-law tail,
-    # corrected by a SpectralDecoder that reads the embeddings (gegnn.spectral).
-    spectral: int = 0
-    spectral_embedding: bool = True           # the correction reads the embedding difference
-    distance: str = "geodesic"                # what the model was trained to predict: "geodesic" | "biharmonic"
-    # Point clouds (0 = meshes): the graph joins every point to its k nearest neighbours, the normals are
-    # estimated and the landmark fields come from the points alone (gegnn.pointcloud).
-    points: int = 0
-
-    def __post_init__(self):
-        object.__setattr__(self, "encoder_blocks", tuple(self.encoder_blocks))
-        object.__setattr__(self, "decoder_blocks", tuple(self.decoder_blocks))
-        if len(self.encoder_blocks) != len(self.decoder_blocks):
-            raise ValueError("encoder_blocks and decoder_blocks need one entry per pooling level each")
-        if self.channels % self.groups:
-            raise ValueError(f"channels ({self.channels}) must be divisible by groups ({self.groups})")
-        if self.decoder not in ("mlp", "euclidean"):
-            raise ValueError(f"decoder must be 'mlp' or 'euclidean', got {self.decoder!r}")
-        if self.landmark_output not in ("ratio", "interval"):
-            raise ValueError(f"landmark_output must be 'ratio' or 'interval', got {self.landmark_output!r}")
-        if self.landmarks < 0 or self.spectral < 0:
-            raise ValueError(f"landmarks and spectral must be >= 0, got {self.landmarks} and {self.spectral}")
-        if self.distance not in ("geodesic", "biharmonic"):
-            raise ValueError(f"distance must be 'geodesic' or 'biharmonic', got {self.distance!r}")
-        if self.landmarks and self.spectral:
-            raise ValueError("a model reads landmark fields (geodesic) or spectral codes (biharmonic), not both")
-        if self.points < 0 or (self.points and self.spectral):
-            raise ValueError(f"points must be >= 0 and takes no spectral codes, got {self.points}")
-
-    @property
-    def levels(self) -> int:
-        """Pooling levels of the U-Net (one per entry of ``encoder_blocks``)."""
-        return len(self.encoder_blocks)
-
-    @property
-    def reads_embeddings(self) -> bool:
-        """Whether the decoder reads the network's embeddings (the ablations --landmark-no-embedding and
-        --spectral-no-embedding decode the fields alone: the network then gets no gradient)."""
-        return not ((self.landmarks and not self.landmark_embedding) or (self.spectral and not self.spectral_embedding))
-
-    def to_json(self) -> str:
-        """The config as JSON (checkpoints keep it in their metadata)."""
-        # inf (plain grid pooling) is written as the JSON extension Infinity, which json reads back.
-        return json.dumps(dataclasses.asdict(self))
-
-    @classmethod
-    def from_json(cls, text: str) -> "GeGnnConfig":
-        """The config of :meth:`to_json`'s text."""
-        return cls(**json.loads(text))
 
 
 class GeGnn(nn.Module):
@@ -218,7 +137,7 @@ class GeGnn(nn.Module):
         same to the bit.
 
         Returns:
-            :class:`gegnn.embedding.Embedding`
+            :class:`gegnn.queries.embedding.Embedding`
         """
         # resolved for the device the model will run on; an unknown precision fails before any work
         precision = resolve(precision, next(self.parameters()).device if device is None else device)
@@ -228,7 +147,7 @@ class GeGnn(nn.Module):
             return self._embed(vertices, faces, precision, normals)
 
     def _embed(self, vertices, faces, precision, normals):
-        from .embedding import Embedding
+        from .queries.embedding import Embedding
 
         device = next(self.parameters()).device
         if self.config.points:
@@ -283,13 +202,13 @@ class GeGnn(nn.Module):
         return hierarchy, fields, scale
 
     def cloud_inputs(self, points: np.ndarray, normals: np.ndarray | None, device):
-        """What a point-cloud model reads for one cloud in any units (:mod:`gegnn.pointcloud`), as
+        """What a point-cloud model reads for one cloud in any units (:mod:`gegnn.fields.pointcloud`), as
         :meth:`inputs` gives it for a mesh: a function giving the hierarchy of its distinct points,
         normalized (their normals estimated there), one giving their landmark fields (the heat method's
         row-by-row set-up is made here, on all of torch's threads; the rest on one, by the function), the
         scale back to the input's units; and the distinct point of every input point (N,) and the part of
         every input point (N,)."""
-        from .pointcloud import cloud_graph, cloud_landmark_solver, collinear
+        from .fields.pointcloud import cloud_graph, cloud_landmark_solver, collinear
 
         points = np.asarray(points, dtype=np.float64)
         if points.ndim != 2 or points.shape[1] != 3 or not np.isfinite(points).all():

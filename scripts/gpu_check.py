@@ -122,7 +122,7 @@ def check_environment(log) -> None:
         print(f"GPU {i}: {p.name}, {p.total_memory / 2**30:.0f} GiB, {p.multi_processor_count} SMs", file=log)
     # what a command pays before its first step
     t0 = time.perf_counter()
-    subprocess.run([sys.executable, "-c", "import gegnn.cli, gegnn.train"], check=True)
+    subprocess.run([sys.executable, "-c", "import gegnn.cli, gegnn.training.loop"], check=True)
     t1 = time.perf_counter()
     subprocess.run([sys.executable, "-c", "import torch; torch.zeros(1, device='cuda'); torch.cuda.synchronize()"],
                    check=True)

@@ -97,9 +97,10 @@ def overfit(store, steps, channels=64, distance="geodesic", **options):
     import torch
 
     from gegnn import GeGnn
-    from gegnn.data import BatchDataset
-    from gegnn.fields import FieldSpec
-    from gegnn.train import lr_at, relative_error, train_step
+    from gegnn.training.data import BatchDataset
+    from gegnn.fields.cache import FieldSpec
+    from gegnn.training.loop import lr_at, train_step
+    from gegnn.metrics import relative_error
 
     torch.manual_seed(0)
     model = GeGnn(small_config(channels, **options))

@@ -8,9 +8,9 @@ import trimesh
 
 from gegnn import Embedding, GeGnn
 from gegnn.decoders import DistanceDecoder
-from gegnn.logmap import log_map, vector_heat_log_map
-from gegnn.paths import SurfaceTopology, trace_path
-from gegnn.statistics import histogram_l1, sample_pairs, shape_distribution, triangle_violations
+from gegnn.queries.logmap import log_map, vector_heat_log_map
+from gegnn.queries.paths import SurfaceTopology, trace_path
+from gegnn.queries.statistics import histogram_l1, sample_pairs, shape_distribution, triangle_violations
 
 
 def plane(n=31, jitter=0.3, seed=0):
@@ -84,7 +84,7 @@ def test_no_path_between_separate_parts():
 def test_pretrained_path_is_close_to_the_exact_path():
     from geodata.geodesic import edge_flip_paths, polyline_length
     from geodata.mesh import Mesh
-    from gegnn.query import exact_field
+    from gegnn.fields.exact import exact_field
 
     m = trimesh.creation.icosphere(4)
     v = np.asarray(m.vertices) * [1.0, 0.8, 0.6]  # an ellipsoid: not a training mesh
@@ -205,7 +205,7 @@ def test_finetune_scores_a_biharmonic_model_against_biharmonic_distances():
     (geodata.biharmonic, computed here independently), not against geodesic ones (~10x apart here)."""
     from geodata.biharmonic import biharmonic_distances
     from geodata.mesh import Mesh
-    from gegnn.train import relative_error
+    from gegnn.metrics import relative_error
 
     m = trimesh.creation.icosphere(2)
     v = np.asarray(m.vertices) * [1.0, 0.6, 0.4]  # longest half-extent 1: normalized units are the mesh's

@@ -33,7 +33,7 @@ def test_train_eval_query(tiny_store, tmp_path):
         rows = list(csv.DictReader(f))
     # What the command wrote is what the library computes for that checkpoint, mesh by mesh.
     from gegnn import GeGnn
-    from gegnn.train import evaluate_store
+    from gegnn.training.loop import evaluate_store
 
     expected = evaluate_store(GeGnn.from_checkpoint(run / "best.safetensors"), tiny_store)
     assert [r["mesh_id"] for r in rows] == [r["mesh_id"] for r in expected] + ["overall"]

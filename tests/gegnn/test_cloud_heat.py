@@ -1,11 +1,11 @@
-"""gegnn.cloud_heat against potpourri3d's point-cloud heat solver: the same neighbourhoods, normals, local
+"""gegnn.fields.cloud_heat against potpourri3d's point-cloud heat solver: the same neighbourhoods, normals, local
 triangles and distance fields (to solver rounding), great circles on a sphere, many sources per solve."""
 import numpy as np
 import pytest
 from gegnn_stores import fibonacci_sphere
 
 from geodata.examples import bumpy_sphere
-from gegnn.cloud_heat import CloudHeatDistance, local_triangulations
+from gegnn.fields.cloud_heat import CloudHeatDistance, local_triangulations
 
 pp3d = pytest.importorskip("potpourri3d")
 

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from gegnn.data import BatchDataset, GeodesicStore, epoch_batches, split_meshes
+from gegnn.training.data import BatchDataset, GeodesicStore, epoch_batches, split_meshes
 
 MESHES = ["ellipsoid_a", "ellipsoid_b", "grid", "sphere"]
 

@@ -7,7 +7,7 @@ from gegnn_stores import ellipsoid, small_config
 
 from gegnn import GeGnn
 from gegnn.decoders import LandmarkDecoder
-from gegnn.embedding import Embedding
+from gegnn.queries.embedding import Embedding
 
 
 def landmark_codes(n=300, d=8, k=21, seed=0):

@@ -6,13 +6,16 @@ import pytest
 import torch
 from gegnn_stores import ellipsoid, small_config
 
-import gegnn.train as gtrain
+import gegnn.distributed as gdistributed
+import gegnn.training.devices as gdevices
+import gegnn.training.loop as gtrain
 from gegnn import Embedding, GeGnn
-from gegnn.data import Batch, BatchDataset
 from gegnn.decoders import DistanceDecoder, LandmarkDecoder
-from gegnn.fields import LANDMARK_DRAWS, FieldCache, FieldSpec, geometry_key
-from gegnn.landmarks import landmark_fields
+from gegnn.fields.cache import LANDMARK_DRAWS, FieldCache, FieldSpec, geometry_key
+from gegnn.fields.landmarks import landmark_fields
+from gegnn.metrics import relative_error
 from gegnn.nn import aggregate, scatter_count
+from gegnn.training.data import Batch, BatchDataset
 
 cuda = pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
 
@@ -28,7 +31,7 @@ def test_training_step_has_no_data_dependent_op(tiny_store, options):
                          FieldSpec.of(model.config))[(0, ("grid", "sphere"))]
     model.to("meta")
     batch = batch.to("meta")
-    loss = gtrain.relative_error(model(batch.hierarchy, batch.pairs, batch.fields), batch.distances).mean()
+    loss = relative_error(model(batch.hierarchy, batch.pairs, batch.fields), batch.distances).mean()
     loss.backward()
     assert loss.device.type == "meta" and all(p.grad is not None for p in model.parameters())
 
@@ -67,12 +70,12 @@ def test_ranks_sharing_a_gpu_use_gloo_and_one_gpu_each(monkeypatch):
     cuda = torch.device("cuda")
     for local_world, gpus, backend in [("2", 1, "gloo"), ("2", 2, "nccl"), ("8", 4, "gloo"), ("1", 1, "nccl")]:
         monkeypatch.setenv("LOCAL_WORLD_SIZE", local_world)
-        assert gtrain.dist_backend(cuda, gpus) == backend
-    assert gtrain.dist_backend(torch.device("cpu"), 4) == "gloo"
+        assert gdistributed.dist_backend(cuda, gpus) == backend
+    assert gdistributed.dist_backend(torch.device("cpu"), 4) == "gloo"
     monkeypatch.setenv("LOCAL_RANK", "3")
-    assert gtrain.pick_device("cuda", gpus=2) == torch.device("cuda", 1)
-    assert gtrain.pick_device("cuda", gpus=4) == torch.device("cuda", 3)
-    assert gtrain.pick_device("cuda:0", gpus=4) == torch.device("cuda", 0)  # an explicit index is kept
+    assert gdevices.pick_device("cuda", gpus=2) == torch.device("cuda", 1)
+    assert gdevices.pick_device("cuda", gpus=4) == torch.device("cuda", 3)
+    assert gdevices.pick_device("cuda:0", gpus=4) == torch.device("cuda", 0)  # an explicit index is kept
 
 
 def test_deterministic_mode_sets_the_cublas_workspace_wherever_it_is_turned_on(monkeypatch):
@@ -81,7 +84,7 @@ def test_deterministic_mode_sets_the_cublas_workspace_wherever_it_is_turned_on(m
     monkeypatch.delenv("CUBLAS_WORKSPACE_CONFIG", raising=False)
     previous = torch.are_deterministic_algorithms_enabled()
     try:
-        gtrain.set_deterministic(True)
+        gdevices.set_deterministic(True)
         assert torch.are_deterministic_algorithms_enabled()
         assert __import__("os").environ["CUBLAS_WORKSPACE_CONFIG"] == ":4096:8"
     finally:
@@ -91,7 +94,7 @@ def test_deterministic_mode_sets_the_cublas_workspace_wherever_it_is_turned_on(m
 def test_chunks_are_sized_by_the_device_the_codes_are_on():
     """On a CPU, chunks that keep intermediates in cache; elsewhere (here the meta device stands for a GPU)
     large ones, for pairs and for surface points alike: few launches."""
-    import gegnn.embedding as gemb
+    import gegnn.queries.embedding as gemb
 
     decoder = LandmarkDecoder(16, 4, 32)
     cpu = gemb.Embedding(torch.zeros(10, 16 + 4 + 3), decoder)
@@ -121,7 +124,7 @@ def test_indices_are_copied_asynchronously_only_towards_an_accelerator(monkeypat
 
 def test_a_dataset_keeps_a_bounded_number_of_meshes(tiny_store, monkeypatch):
     """Every loader worker keeps meshes it has read: the last GEOMETRY_CACHE, not every mesh of the store."""
-    import gegnn.data as gdata
+    import gegnn.training.data as gdata
 
     monkeypatch.setattr(gdata, "GEOMETRY_CACHE", 2)
     ds = BatchDataset(tiny_store, "geodesic", 0, 100, False, 5, 1 / 16, 3 / 16)
@@ -135,14 +138,14 @@ def test_a_dataset_keeps_a_bounded_number_of_meshes(tiny_store, monkeypatch):
 def test_auto_workers_by_device_and_cores(monkeypatch):
     """--workers auto: none on a CPU (the cores are the network's); on a GPU one per spare core of the
     rank, at least one, at most MAX_AUTO_WORKERS."""
-    for cores, on_gpu in [(1, 1), (2, 1), (6, 5), (16, gtrain.MAX_AUTO_WORKERS), (64, gtrain.MAX_AUTO_WORKERS)]:
-        monkeypatch.setattr(gtrain, "cpus_per_process", lambda: cores)
-        assert gtrain.auto_workers(torch.device("cpu")) == 0
-        assert gtrain.auto_workers(torch.device("cuda")) == on_gpu
+    for cores, on_gpu in [(1, 1), (2, 1), (6, 5), (16, gdevices.MAX_AUTO_WORKERS), (64, gdevices.MAX_AUTO_WORKERS)]:
+        monkeypatch.setattr(gdevices, "cpus_per_process", lambda: cores)
+        assert gdevices.auto_workers(torch.device("cpu")) == 0
+        assert gdevices.auto_workers(torch.device("cuda")) == on_gpu
     monkeypatch.undo()
     monkeypatch.setenv("LOCAL_WORLD_SIZE", "4")
     monkeypatch.setattr("os.sched_getaffinity", lambda pid: set(range(32)))
-    assert gtrain.cpus_per_process() == 8  # a node's cores shared by its ranks
+    assert gdevices.cpus_per_process() == 8  # a node's cores shared by its ranks
 
 
 def test_validation_keeps_few_loader_workers(tiny_store, tmp_path, monkeypatch):
@@ -297,7 +300,7 @@ def test_training_fills_the_landmark_cache_and_workers_only_read_it(tiny_store, 
     def no_compute(*args, **kwargs):
         raise AssertionError("a landmark field was computed, not read from the cache")
 
-    monkeypatch.setattr("gegnn.fields.landmark_solver", no_compute)
+    monkeypatch.setattr("gegnn.fields.cache.landmark_solver", no_compute)
     for epoch in (-1, 0, 1, 2):
         for mesh_id in train_ids + [(-1, m) for m in val_ids]:
             if isinstance(mesh_id, tuple):  # validation meshes: seed 0 only

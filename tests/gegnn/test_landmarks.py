@@ -11,16 +11,19 @@ import torch
 import trimesh
 from gegnn_stores import ellipsoid, exact_pairs, flat_grid, overfit, small_config
 
+import gegnn.fields.landmarks as landmarks_module
+import gegnn.training.loop as gtrain
 from gegnn import GeGnn, GeGnnConfig
 from gegnn.checkpoint import load_checkpoint
-from gegnn.data import BatchDataset
 from gegnn.decoders import LandmarkDecoder
-from gegnn.fields import FieldSpec
-import gegnn.landmarks as landmarks_module
-from gegnn.heat import HeatDistance, cover_problem
-from gegnn.landmarks import landmark_fields
-import gegnn.train as gtrain
-from gegnn.train import TrainConfig, relative_error, train
+from gegnn.distributed import Dist
+from gegnn.fields.cache import FieldSpec
+from gegnn.fields.heat import HeatDistance, cover_problem
+from gegnn.fields.landmarks import landmark_fields
+from gegnn.metrics import relative_error
+from gegnn.training.data import BatchDataset
+from gegnn.training.loop import TrainConfig, train
+from gegnn.training.warmup import warm_decoder
 
 
 def exact_matrix(v, f) -> np.ndarray:
@@ -214,14 +217,14 @@ def test_decoder_warmup_trains_the_decoder_alone(tiny_store):
                             for b in (dataset[(-1, (m,))] for m in ids)])
 
     before, network = error(), {k: v.clone() for k, v in model.state_dict().items() if not k.startswith("distance.")}
-    keys = gtrain.single_mesh_keys(ids, gtrain.Dist())
-    gtrain.warm_decoder(model, (dataset[k] for k in keys), 200, 3e-3, torch.device("cpu"), logging.getLogger("test"))
+    keys = gtrain.single_mesh_keys(ids, Dist())
+    warm_decoder(model, (dataset[k] for k in keys), 200, 3e-3, torch.device("cpu"), logging.getLogger("test"))
     assert error() < 0.7 * before
     for name, value in network.items():
         torch.testing.assert_close(model.state_dict()[name], value)
 
 
-# --- The heat method: potpourri3d's robust fields, reproduced (gegnn.heat) -------------------------
+# --- The heat method: potpourri3d's robust fields, reproduced (gegnn.fields.heat) -------------------------
 
 def bumpy_sphere(seed=0):
     """No symmetry left, and noise that takes 350 intrinsic flips on the cover (3,840 edges)."""
@@ -281,7 +284,7 @@ def test_heat_fields_equal_potpourri3d_robust_fields(make):
     """Every vertex as a source: our fields are potpourri3d's to solver rounding (measured <= 1e-9 of
     the largest distance). Measured on these meshes: a flip queue that skips re-evaluating edges ahead
     in its first pass is off by 1.6e-2, one sheet counted twice instead of both by 1.9e-3."""
-    from gegnn.heat import _mollify, _tufted_cover
+    from gegnn.fields.heat import _mollify, _tufted_cover
 
     v, f = make()
     assert cover_problem(v, f) is None
@@ -303,7 +306,7 @@ def test_heat_fields_solved_together_on_threads_are_each_sources_own_and_the_sys
     import scipy.sparse as sp
     import scipy.sparse.linalg as sla
 
-    import gegnn.heat as heat
+    import gegnn.fields.heat as heat
 
     kept = {}
     factor = heat.HeatSolver._factor
@@ -341,7 +344,7 @@ def test_graph_farthest_points_are_those_of_full_dijkstra_searches():
     import scipy.sparse as sp
     from scipy.sparse.csgraph import dijkstra
 
-    from gegnn.pointcloud import knn_edges
+    from gegnn.fields.pointcloud import knn_edges
 
     grid = np.stack(np.meshgrid(np.arange(12.0), np.arange(9.0), [0.0], indexing="ij"), -1).reshape(-1, 3)
     apart = np.concatenate([grid, grid + [0.0, 50.0, 0.0]])
@@ -366,7 +369,7 @@ def test_graph_farthest_points_are_those_of_full_dijkstra_searches():
 def test_heat_gradient_divergence_equals_scipy_products_bit_for_bit(monkeypatch):
     """The compiled middle step (src/heat_ops.cpp) is SciPy's G u, NumPy's normalization and D X, in their
     order of sums: one source and several, with a zero gradient (u = 0) kept zero."""
-    import gegnn.heat as heat
+    import gegnn.fields.heat as heat
 
     kept = {}
     factor = heat.HeatSolver._factor

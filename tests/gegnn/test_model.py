@@ -74,7 +74,7 @@ def test_embed_any_units_and_queries():
 
 
 def test_bf16_queries_close_to_fp32():
-    from gegnn.embedding import Embedding
+    from gegnn.queries.embedding import Embedding
 
     torch.manual_seed(0)
     model = GeGnn(small_config(channels=32))

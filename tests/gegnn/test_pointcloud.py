@@ -8,8 +8,8 @@ import pytest
 from gegnn_stores import ellipsoid, fibonacci_sphere, small_config
 
 from gegnn import GeGnn
-from gegnn.pointcloud import (_tree_signs, cloud_graph, cloud_landmark_fields, knn_edges, mls_project,
-                              pca_normals, surface_neighbors)
+from gegnn.fields.pointcloud import (_tree_signs, cloud_graph, cloud_landmark_fields, knn_edges, mls_project,
+                                     pca_normals, surface_neighbors)
 
 
 def test_knn_edges_are_each_pair_once_and_hold_every_points_neighbours():
@@ -195,7 +195,7 @@ def test_query_a_cloud_with_an_outlier_against_the_exact_field(cloud_model, tmp_
     from click.testing import CliRunner
 
     from gegnn.cli import main
-    from gegnn.query import exact_at_points
+    from gegnn.fields.exact import exact_at_points
 
     sphere = trimesh.creation.icosphere(4)
     p = fibonacci_sphere(1500)

@@ -8,7 +8,7 @@ from gegnn_stores import ellipsoid
 from gegnn import GeGnn, GeGnnConfig
 from gegnn.checkpoint import load_checkpoint
 from gegnn.cli import main
-from gegnn.query import load_query_mesh, read_pairs
+from gegnn.queries.files import load_query_mesh, read_pairs
 
 SMALL = GeGnnConfig(channels=16, embed_dim=16, decoder_hidden=16, encoder_blocks=(1,) * 5,
                     decoder_blocks=(1,) * 5)
@@ -150,7 +150,7 @@ def test_coarse_mesh_gets_a_resolution_note(ckpt, tmp_path):
 def test_resolution_note_follows_the_measurements():
     """The landmark model was measured at 1k-100k vertices without loss (docs/applications.md): no note at 80k;
     the paper model drifts, so it gets one there."""
-    from gegnn.query import resolution_note
+    from gegnn.queries.files import resolution_note
 
     assert resolution_note(80_000, GeGnn.pretrained().config) is None
     assert "11.3% at 80k" in resolution_note(80_000, GeGnn.pretrained("paper").config)
@@ -186,7 +186,7 @@ def test_pairwise_matrix_in_file_numbering_exact_and_heat(soup, ckpt, tmp_path):
     r = runner.invoke(main, ["pairwise", ckpt, path, "--rows", str(rows), "--exact", "-o", str(tmp_path / "e.npy")])
     assert r.exit_code == 0, r.output
     e = np.load(tmp_path / "e.npy")
-    from gegnn.query import exact_field
+    from gegnn.fields.exact import exact_field
     np.testing.assert_allclose(e[1], qm.to_file(exact_field(qm.mesh, int(qm.to_mesh[0]))), rtol=1e-6)  # float32
     assert np.array_equal(d[[3, 0]] == 0, e == 0)  # the same layout: 0 at the row vertex and its copies
     r = runner.invoke(main, ["pairwise", ckpt, path, "--rows", str(rows), "--heat", "-o", str(tmp_path / "h.npy")])

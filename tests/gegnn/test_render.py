@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from geodata.examples import example_soups
-from gegnn.render import UP_AXES, View, default_view, rasterize, shade_field, up_axis
+from gegnn.pictures.render import UP_AXES, View, default_view, rasterize, shade_field, up_axis
 
 FRONT = View(np.eye(3), np.zeros(3))  # screen right = x, up = y, viewer on +z
 

@@ -11,7 +11,7 @@ from geodata.biharmonic import biharmonic_distances
 from geodata.mesh import Mesh
 from gegnn import GeGnn
 from gegnn.decoders import SpectralDecoder
-from gegnn.spectral import spectral_codes, weyl_shape, weyl_table
+from gegnn.fields.spectral import spectral_codes, weyl_shape, weyl_table
 
 
 def truncated(codes, i, j, m):

@@ -8,12 +8,15 @@ import torch
 import torch.multiprocessing as mp
 from gegnn_stores import overfit, small_config
 
-import gegnn.train as gtrain
+import gegnn.training.loop as gtrain
 from gegnn import GeGnn
 from gegnn.checkpoint import load_checkpoint
-from gegnn.data import BatchDataset
-from gegnn.fields import FieldSpec
-from gegnn.train import TrainConfig, relative_error, train
+from gegnn.distributed import Dist
+from gegnn.fields.cache import FieldSpec
+from gegnn.metrics import relative_error
+from gegnn.training.data import BatchDataset
+from gegnn.training.loop import TrainConfig, train
+from gegnn.training.warmup import warm_decoder
 
 
 def test_overfit_one_mesh_learns(one_mesh_store):
@@ -159,10 +162,10 @@ def _ddp_worker(rank, port, store, out):
         model = GeGnn(small_config(landmarks=4))
         initial = {k: v.clone() for k, v in model.distance.state_dict().items()}
         ds = BatchDataset(store, "geodesic", 0, 200, False, 5, 1 / 16, 3 / 16, FieldSpec("landmark", 4))
-        ctx = gtrain.Dist(rank, 2)
+        ctx = Dist(rank, 2)
         keys = gtrain.single_mesh_keys(["grid", "sphere", "ellipsoid_a", "ellipsoid_b"], ctx)
-        gtrain.warm_decoder(model, (ds[k] for k in keys), 20, 3e-3, torch.device("cpu"),
-                            logging.getLogger("test"), ctx, pairs_per_step=256)
+        warm_decoder(model, (ds[k] for k in keys), 20, 3e-3, torch.device("cpu"),
+                     logging.getLogger("test"), ctx, pairs_per_step=256)
         assert not torch.equal(model.distance.mlp[0].weight, initial["mlp.0.weight"])
         torch.save(model.distance.state_dict(), Path(out) / f"decoder{rank}.pt")
         train(TrainConfig(store=store, run=str(Path(out) / "lm"), epochs=1, batch_size=1, pairs_per_mesh=200,
@@ -216,13 +219,13 @@ def _ddp_kinds_worker(rank, ports, store, out):
 
     import torch.distributed as dist
 
-    import gegnn.fields
+    import gegnn.fields.cache
 
     os.environ.update(MASTER_ADDR="127.0.0.1", RANK=str(rank), LOCAL_RANK=str(rank), WORLD_SIZE="2",
                       LOCAL_WORLD_SIZE="2")
     torch.set_num_threads(1)
     # After the fill, the loader must read every field from the cache: computing one fails the run.
-    gegnn.fields.FieldSpec.compute = lambda *a, **k: (_ for _ in ()).throw(AssertionError("a field was computed"))
+    gegnn.fields.cache.FieldSpec.compute = lambda *a, **k: (_ for _ in ()).throw(AssertionError("a field was computed"))
     for port, (name, (distance, options)) in zip(ports, KINDS.items()):
         os.environ["MASTER_PORT"] = str(port)  # a run of its own, as torchrun would start it
         train(TrainConfig(store=store, run=str(Path(out) / name), epochs=2, batch_size=1, pairs_per_mesh=200,
@@ -237,7 +240,7 @@ def test_ddp_trains_every_model_kind_from_a_cache_both_ranks_filled(tmp_path):
     loaders never compute a field (FieldSpec.compute raises in both ranks)."""
     from gegnn_stores import FOUR_MESHES, write_store
 
-    from gegnn.data import GeodesicStore
+    from gegnn.training.data import GeodesicStore
 
     store = write_store(tmp_path / "dup.zarr", {**FOUR_MESHES, "sphere_copy": FOUR_MESHES["sphere"]}, biharmonic=True)
     mp.spawn(_ddp_kinds_worker, args=(_free_ports(len(KINDS)), store, str(tmp_path)), nprocs=2, join=True)

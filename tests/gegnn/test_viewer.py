@@ -12,7 +12,7 @@ import pytest
 from geodata.examples import bumpy_sphere
 from geodata.mesh import Mesh, vertex_components
 from gegnn.model import GeGnn
-from gegnn.viewer import view_page
+from gegnn.pictures.viewer import view_page
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
@@ -133,7 +133,7 @@ def test_exact_fields_and_their_error(browser, tmp_path, embeddings, mesh):
     predicted = expected_field(emb, mesh, 0)
     exact = predicted * 1.1  # any field: the page shows what it is given
     page = open_page(browser, tmp_path, view_page(emb, title="exact", sources=[0], exact={0: exact}))
-    truth = np.abs(predicted - exact) / (exact + 1e-3 * emb.scale)  # gegnn.query.relative_errors
+    truth = np.abs(predicted - exact) / (exact + 1e-3 * emb.scale)  # gegnn.queries.files.relative_errors
     truth[0] = 0
     mre = np.nanmean(truth[1:])
     assert f"mean relative error vs exact {100 * mre:.2f}%" in page.inner_text("#gegnn-source")

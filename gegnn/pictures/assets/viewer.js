@@ -134,7 +134,7 @@
   let yaw = 0, pitch = cam.elevation, zoom = 1, panX = 0, panY = 0;
   function cross(a, b) { return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]; }
   function normalize(a) { const n = Math.hypot(a[0], a[1], a[2]); return [a[0] / n, a[1] / n, a[2] / n]; }
-  function rotation() {  // rows: screen right, screen up, towards the viewer (as gegnn.render.View)
+  function rotation() {  // rows: screen right, screen up, towards the viewer (as gegnn.pictures.render.View)
     const cy = Math.cos(yaw), sy = Math.sin(yaw), cp = Math.cos(pitch), sp = Math.sin(pitch);
     const toward = [0, 1, 2].map((i) => cp * (cy * H0[i] + sy * H1[i]) + sp * UP[i]);
     const right = normalize(cross(UP, toward));
@@ -266,7 +266,7 @@
     return [state.predicted, LUTS.viridis, 0, top, ISOLINES];
   }
   function max(a) { let m = 0; for (const x of a) if (x > m) m = x; return m; }
-  function relativeError() {  // |pred - exact| / (exact + offset): gegnn.query.relative_errors, 0 at the source
+  function relativeError() {  // |pred - exact| / (exact + offset): gegnn.queries.files.relative_errors, 0 at the source
     const out = new Float32Array(N), p = state.predicted, e = state.exact;
     for (let v = 0; v < N; v++) out[v] = Math.abs(p[v] - e[v]) / (e[v] + DATA.metric_offset);
     out[state.source] = 0;

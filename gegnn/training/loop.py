@@ -10,10 +10,8 @@ import csv
 import dataclasses
 import logging
 import math
-import os
 import time
 from dataclasses import dataclass
-from datetime import timedelta
 from pathlib import Path
 
 import torch
@@ -22,26 +20,26 @@ from tqdm import tqdm
 
 from geodata.progress import progress_bar
 
-from .checkpoint import load_checkpoint, save_checkpoint
+from ..checkpoint import load_checkpoint, save_checkpoint
+from ..config import GeGnnConfig
+from ..distributed import Dist, all_sum, setup_distributed
+from ..fields.cache import FieldCache, FieldSpec
+from ..fitting import show_loss
+from ..metrics import pair_errors, relative_error
+from ..model import GeGnn
 from .data import VAL_EPOCH, BatchDataset, EpochSampler, GeodesicStore, split_meshes
-from .fields import FieldCache, FieldSpec
-from .model import GeGnn, GeGnnConfig
+from .devices import auto_workers, cpus_per_process, pick_device, set_deterministic
+from .warmup import warm_decoder
 
 __all__ = ["TrainConfig", "train", "relative_error", "evaluate_store", "lr_at"]
 
 METRICS = ["epoch", "step", "lr", "train_mre", "val_mre", "seconds"]
-METRIC_EPS = 1e-3  # offset of the relative error's denominator, in normalized units
 # Options a resumed run takes from the command line ("landmark_cache": field_cache's name in older runs).
 RESUME_KEEPS = ("epochs", "device", "workers", "field_cache", "landmark_cache")
 DECODER_KINDS = ("decoder", "landmark", "spectral")  # GeGnnConfig fields that choose the decoder (name prefixes)
 WARMUP_LR = 1e-3  # decoder warm-up: a small MLP on fixed codes (the network's --lr is usually lower)
-WARMUP_BYTES = 2 << 30  # decoder warm-up: codes and pairs kept on the device, per rank
 VAL_WORKERS = 2  # loader processes of validation, at most (each holds its meshes while training runs)
-MAX_AUTO_WORKERS = 8  # --workers auto on a GPU: one per spare CPU core, at most this many (docs/benchmarks.md)
 PROGRESS_EVERY = 25  # steps between progress-bar updates (each reads a loss from the device)
-# Collectives may wait this long: ranks meet after filling the field cache, whose shares can differ by many
-# meshes (NCCL's default of 10 minutes would end a long fill).
-DIST_TIMEOUT = timedelta(hours=6)
 
 
 @dataclass(frozen=True)
@@ -69,93 +67,11 @@ class TrainConfig:
     deterministic: bool = False      # torch's deterministic algorithms: bitwise-exact resume on CUDA too
 
 
-def relative_error(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
-    """Per pair |d_pred - d| / (d + 1e-3): the paper's loss and metric (mean it for the MRE)."""
-    return (pred.float() - target).abs() / (target + METRIC_EPS)
-
-
 def lr_at(step: int, total: int, base: float, warmup: int) -> float:
     """Linear warm-up, then polynomial decay with power 0.9 to zero at ``total``."""
     if warmup and step < warmup:
         return base * (step + 1) / warmup
     return base * max(0.0, 1 - step / max(total, 1)) ** 0.9
-
-
-# -- processes and devices ---------------------------------------------------------------------------
-@dataclass
-class Dist:
-    rank: int = 0
-    world: int = 1
-    owned: bool = False  # this module made the process group, and ends it
-
-    @property
-    def main(self) -> bool:
-        return self.rank == 0
-
-
-def dist_backend(device: torch.device, gpus: int | None = None) -> str:
-    """NCCL where each of this node's ranks drives a GPU of its own; gloo on CPUs and where ranks share a
-    GPU (NCCL refuses two ranks on one device)."""
-    if device.type != "cuda":
-        return "gloo"
-    gpus = torch.cuda.device_count() if gpus is None else gpus
-    return "nccl" if int(os.environ.get("LOCAL_WORLD_SIZE", "1")) <= gpus else "gloo"
-
-
-def setup_distributed(device: torch.device) -> Dist:
-    """Join the process group torchrun describes (or one the caller already made)."""
-    if not dist.is_initialized() and int(os.environ.get("WORLD_SIZE", "1")) > 1:
-        dist.init_process_group(dist_backend(device), timeout=DIST_TIMEOUT)
-        return Dist(dist.get_rank(), dist.get_world_size(), owned=True)
-    if not dist.is_initialized():
-        return Dist()
-    return Dist(dist.get_rank(), dist.get_world_size())
-
-
-def pick_device(name: str, gpus: int | None = None) -> torch.device:
-    """The device ``name`` means for this process: ``auto`` is CUDA where there is one; a rank of torchrun
-    takes GPU LOCAL_RANK (modulo the GPUs there are, so ranks may share one)."""
-    if name == "auto":
-        name = "cuda" if torch.cuda.is_available() else "cpu"
-    device = torch.device(name)
-    if device.type == "cuda" and device.index is None:
-        gpus = torch.cuda.device_count() if gpus is None else gpus
-        device = torch.device("cuda", int(os.environ.get("LOCAL_RANK", "0")) % max(gpus, 1))
-    if device.type == "cuda":
-        torch.cuda.set_device(device)
-    return device
-
-
-def set_deterministic(enabled: bool) -> None:
-    """torch's deterministic algorithms on or off. cuBLAS is deterministic only with a fixed workspace, which
-    it reads when CUDA starts: set here (unless the user set one), before any CUDA work of the process."""
-    if enabled:
-        os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
-    torch.use_deterministic_algorithms(enabled)
-
-
-def cpus_per_process() -> int:
-    """CPU cores this process may use, shared with the other processes of its node (torchrun's
-    LOCAL_WORLD_SIZE)."""
-    cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
-    return max(1, cpus // int(os.environ.get("LOCAL_WORLD_SIZE", "1")))
-
-
-def auto_workers(device: torch.device) -> int:
-    """Loader processes for ``--workers auto``: on a GPU one per spare core of this rank (at most
-    ``MAX_AUTO_WORKERS``), since a batch takes longer to build on one core than a step takes on the GPU;
-    on a CPU none, since the cores are the network's."""
-    if device.type == "cpu":
-        return 0
-    return min(MAX_AUTO_WORKERS, max(1, cpus_per_process() - 1))
-
-
-def all_sum(values: list[float], ctx: Dist, device) -> list[float]:
-    if ctx.world == 1:
-        return values
-    t = torch.tensor(values, dtype=torch.float64, device=device)
-    dist.all_reduce(t)
-    return t.tolist()
 
 
 # -- one step, one epoch ---------------------------------------------------------------------------
@@ -195,14 +111,6 @@ def train_epoch(model, loader, optimizer, cfg: TrainConfig, step: int, total: in
     return total_loss / max(count, 1), step
 
 
-def show_loss(bar, losses: list[torch.Tensor]) -> None:
-    """Show the loss of the step before the last: the device is busy with the last one meanwhile, so
-    reading it does not drain the queue of launched kernels."""
-    if bar.disable:
-        return
-    bar.set_postfix(mre=f"{losses[-2 if len(losses) > 1 else -1].item():.4f}")
-
-
 @torch.no_grad()
 def validate(model, loader, device, ctx: Dist) -> float:
     """MRE over a fixed sample of pairs (same every epoch, no rotation) of this rank's share, in fp32 (as
@@ -216,93 +124,6 @@ def validate(model, loader, device, ctx: Dist) -> float:
         count += e.numel()
     err, count = all_sum([err.item(), count], ctx, device)
     return err / count if count else float("nan")
-
-
-def fit_pairs(params, loss_fn, n_pairs: int, steps: int, lr: float, pairs_per_step: int,
-              generator: torch.Generator, desc: str, progress: bool = True, ctx: Dist | None = None) -> list[float]:
-    """``steps`` AdamW steps (no weight decay) on ``params``, each on the loss ``loss_fn(indices)`` of
-    ``pairs_per_step`` random indices into ``n_pairs`` pairs, drawn on the ``generator``'s device, the
-    learning rate decaying linearly from ``lr`` to 0. With ``ctx`` of several processes the gradients are
-    averaged across them (each process its own pairs). Returns the losses. The loop of the decoder
-    warm-up and of finetuning."""
-    params = list(params)
-    optimizer = torch.optim.AdamW(params, lr=lr, weight_decay=0.0)
-    losses = []
-    bar = progress_bar(range(steps), desc=desc, leave=False, disable=not progress, dynamic_ncols=True)
-    for step in bar:
-        for group in optimizer.param_groups:
-            group["lr"] = lr * (1 - step / steps)
-        pick = torch.randint(n_pairs, (pairs_per_step,), generator=generator, device=generator.device)
-        loss = loss_fn(pick)
-        optimizer.zero_grad(set_to_none=True)
-        loss.backward()
-        if ctx is not None and ctx.world > 1:
-            average_gradients(params, ctx)
-        optimizer.step()
-        losses.append(loss.detach())
-        if step % 100 == 1:
-            show_loss(bar, losses)
-    return torch.stack(losses).tolist() if losses else []
-
-
-def average_gradients(params: list[torch.Tensor], ctx: Dist) -> None:
-    """Mean of the gradients over the processes: one all-reduce of all of them, flattened."""
-    grads = [p.grad for p in params if p.grad is not None]
-    flat = torch.cat([g.reshape(-1) for g in grads])
-    dist.all_reduce(flat)
-    flat /= ctx.world
-    for g, part in zip(grads, flat.split([g.numel() for g in grads])):
-        g.copy_(part.view_as(g))
-
-
-def pair_errors(distance, codes: torch.Tensor, pairs: torch.Tensor, targets: torch.Tensor,
-                chunk: int = 65536) -> torch.Tensor:
-    """Relative errors (P,) of the decoder ``distance`` on ``pairs`` (P, 2) of vertex ``codes``, decoded
-    ``chunk`` pairs at a time."""
-    return torch.cat([relative_error(distance(codes[p[:, 0]], codes[p[:, 1]]), d)
-                      for p, d in zip(pairs.split(chunk), targets.split(chunk))])
-
-
-def warm_decoder(model, loader, steps: int, lr: float, device, log, ctx: Dist | None = None,
-                 pairs_per_step: int = 16384, budget: int = WARMUP_BYTES) -> None:
-    """Train the decoder alone on the frozen network's codes of the meshes of ``loader`` (validation-style
-    batches of one mesh: no rotation, landmark seed 0).
-
-    A fresh decoder needs thousands of optimizer steps, the network a few hundred: one network step
-    costs ~3 s on a 2-core CPU, one decoder step on precomputed codes ~10 ms. The codes (one forward
-    pass per mesh) and a fixed sample of pairs are kept on the device (~4 MB per 5k-vertex mesh at
-    K = 128 and 20k pairs, ~10 MB at 100k pairs), up to ``budget`` bytes per process: the meshes beyond it
-    are left out. Under DDP every rank does this with its own meshes and pairs, and the gradients are
-    averaged, so all ranks leave with the same decoder. Decays linearly to 0 over ``steps``."""
-    ctx = ctx or Dist()
-    model.eval()
-    codes, pairs, dists, offset, used = [], [], [], 0, 0
-    with torch.no_grad():
-        for batch in progress_bar(loader, desc="decoder warm-up: codes", leave=False, disable=not ctx.main,
-                          dynamic_ncols=True):
-            batch = batch.to(device)
-            z = model(batch.hierarchy, fields=batch.fields)
-            codes.append(z)
-            pairs.append(batch.pairs + offset)
-            dists.append(batch.distances)
-            offset += len(z)
-            used += sum(t.numel() * t.element_size() for t in (z, batch.pairs, batch.distances))
-            if used >= budget:
-                break
-    n_meshes = len(codes)
-    codes, pairs, dists = torch.cat(codes), torch.cat(pairs), torch.cat(dists)
-    model.train()
-
-    def loss(pick):
-        p = pairs[pick]
-        return relative_error(model.distance(codes[p[:, 0]], codes[p[:, 1]]), dists[pick]).mean()
-
-    generator = torch.Generator(device).manual_seed(ctx.rank)
-    losses = fit_pairs(model.distance.parameters(), loss, len(pairs), steps, lr, pairs_per_step, generator,
-                       "decoder warm-up", progress=ctx.main, ctx=ctx)
-    model.zero_grad(set_to_none=True)
-    log.info(f"decoder warm-up: {steps} steps on {n_meshes} meshes' codes per process "
-             f"({used / 2 ** 20:.0f} MiB), MRE {losses[0]:.4f} -> {sum(losses[-50:]) / len(losses[-50:]):.4f}")
 
 
 # -- run directory ---------------------------------------------------------------------------------
@@ -558,7 +379,7 @@ def fill_field_cache(path: str, spec: FieldSpec, work: list[tuple], ctx: Dist, d
     """Compute the fields that ``path`` lacks, for ``work``: (dataset, mesh ids, seeds) triples, keyed
     as the datasets' loaders look them up. Every rank takes the meshes whose key falls to it (so two ids
     of one content are one task, on one rank: no two ranks write one key) and the CPU cores of its share
-    of the node; the fields then serve every loader worker and rank (:mod:`gegnn.fields`)."""
+    of the node; the fields then serve every loader worker and rank (:mod:`gegnn.fields.cache`)."""
     cache = FieldCache(path, spec)
     if ctx.main:
         cache.create()  # once, before the ranks write into it

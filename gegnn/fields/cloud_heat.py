@@ -47,7 +47,7 @@ length after the flips), as geometry-central's mesh method on the cover (no seco
 
 Identical cover triangles (same corners, bitwise equal lengths; a local triangle and its copies often
 appear six times) count once with their multiplicity; both systems are factored and solved as on
-meshes (:class:`gegnn.heat.HeatSolver`).
+meshes (:class:`gegnn.fields.heat.HeatSolver`).
 
 Measured against potpourri3d 1.4.0 (``benchmarks/bench_cloud_heat.py``; one core of a 2-core AMD EPYC
 shared with other work, medians): on the 19 validation clouds (~5,000 points) every normal (bitwise)
@@ -67,7 +67,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import threads
+from .. import threads
 from .heat import DELAUNAY_EPS, HeatSolver, _Cover, _cotan_halves, gradient_divergence, laplacian, relink
 
 __all__ = ["CloudHeatDistance", "local_triangulations", "K_NEIGHBORS"]
@@ -246,7 +246,7 @@ def _rowwise_lexsort(primary: np.ndarray, secondary: np.ndarray) -> np.ndarray:
 
 def _soup_cover(points: np.ndarray, faces: np.ndarray) -> _Cover:
     """The mollified tufted cover of the soup in geometry-central's element order (see
-    :class:`gegnn.heat._Cover`): front halfedge 3f + c runs from corner c to c + 1, its back copy
+    :class:`gegnn.fields.heat._Cover`): front halfedge 3f + c runs from corner c to c + 1, its back copy
     3F + 3f + c the other way. Edges: the soup's (in order of first appearance) keep the pair
     (h_0, h_1's back-or-front); then, edge by edge, the new edges glue h_0's other sheet to h_{n-1},
     h_{n-1}'s to h_{n-2}, ..., h_2's to h_1 (each halfedge pair oppositely oriented)."""
@@ -305,7 +305,7 @@ def _soup_cover(points: np.ndarray, faces: np.ndarray) -> _Cover:
 
 
 def _layout(pax, pay, pbx, pby, l_bc, l_ca):
-    """geometry-central's layoutTriangleVertex, vectorized (as :func:`gegnn.heat._layout`)."""
+    """geometry-central's layoutTriangleVertex, vectorized (as :func:`gegnn.fields.heat._layout`)."""
     dx, dy = pbx - pax, pby - pay
     l_ab = np.sqrt(dx * dx + dy * dy)
     s = (l_ab + l_bc + l_ca) / 2.0
@@ -319,7 +319,7 @@ def _layout(pax, pay, pbx, pby, l_bc, l_ca):
 def _flip_rounds(cover: _Cover, eps: float = DELAUNAY_EPS) -> int:
     """Intrinsic Delaunay flips in rounds, in place: each round flips, at once, every edge with cotangent
     weight below -eps that has the smallest such index on both its faces. Each flip is
-    geometry-central's (as :func:`gegnn.heat._flip_to_delaunay`: same layout arithmetic, same halfedge
+    geometry-central's (as :func:`gegnn.fields.heat._flip_to_delaunay`: same layout arithmetic, same halfedge
     updates, refused where the new length is not finite or a vertex has degree 1); an edge refused
     waits until one of its faces changes. Ends where geometry-central's queue ends wherever the
     Delaunay triangulation is unique (generic input): the same triangles, lengths equal to rounding."""
@@ -441,7 +441,7 @@ def local_triangulations(points, neighbors: np.ndarray | None = None) -> tuple[n
     (``src/local_triangulation.cpp``: the module's normals and local triangulations, the library's arithmetic
     in its order), in blocks of rows on torch's threads (:func:`gegnn.threads.by_rows`). ValueError for
     points the method cannot take."""
-    from ._local_triangulation import local_triangulations as triangulate
+    from .._local_triangulation import local_triangulations as triangulate
 
     p = np.ascontiguousarray(points, dtype=np.float64)
     if p.ndim != 2 or p.shape[1] != 3 or len(p) <= K_NEIGHBORS:
@@ -464,7 +464,7 @@ class CloudHeatDistance(HeatSolver):
         points: (N, 3) float, finite, N > 30.
         t_coef: time step over the mean squared cover edge length (potpourri3d's default 1).
         neighbors: (N, k) int, each point's neighbours nearest first, instead of potpourri3d's 30 nearest
-            (then the fields are no longer the library's: :func:`gegnn.pointcloud.surface_neighbors`).
+            (then the fields are no longer the library's: :func:`gegnn.fields.pointcloud.surface_neighbors`).
         triangles: ``local_triangulations(points, neighbors)``, where they were made before.
 
     Attributes:

@@ -5,7 +5,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from . import precision as _precision
+from .. import precision as _precision
 
 __all__ = ["Embedding"]
 
@@ -231,10 +231,10 @@ class Embedding:
 
     def path(self, i: int, j: int):
         """The geodesic path from vertex ``i`` to vertex ``j``: the steepest descent of the predicted field
-        d(i, .) traced back from ``j`` (:mod:`gegnn.paths`); O(k) queries for the k faces it crosses.
+        d(i, .) traced back from ``j`` (:mod:`gegnn.queries.paths`); O(k) queries for the k faces it crosses.
 
         Returns:
-            :class:`gegnn.paths.Path`: ``points`` (K, 3) on the surface from i to j, ``length``.
+            :class:`gegnn.queries.paths.Path`: ``points`` (K, 3) on the surface from i to j, ``length``.
         """
         from .paths import trace_path
         i, j = int(i), int(j)
@@ -242,10 +242,10 @@ class Embedding:
 
     def log_map(self, center: int, radius: float | None = None):
         """Geodesic polar coordinates around vertex ``center`` (the discrete logarithmic map) of the
-        vertices within ``radius`` (default: all), from distance queries alone (:mod:`gegnn.logmap`).
+        vertices within ``radius`` (default: all), from distance queries alone (:mod:`gegnn.queries.logmap`).
 
         Returns:
-            :class:`gegnn.logmap.LogMap`: ``vertices`` (M,), ``uv`` (M, 2), the tangent ``frame``.
+            :class:`gegnn.queries.logmap.LogMap`: ``vertices`` (M,), ``uv`` (M, 2), the tangent ``frame``.
         """
         from .logmap import log_map
         return log_map(self.topology, self.distance, int(center), radius)

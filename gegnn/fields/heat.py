@@ -56,7 +56,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from . import threads
+from .. import threads
 
 __all__ = ["HeatSolver", "HeatDistance", "cover_problem", "MOLLIFY", "DELAUNAY_EPS", "POISSON_SHIFT"]
 
@@ -381,7 +381,7 @@ class HeatSolver:
         ValueError where a system is not numerically positive definite (degenerate input)."""
         if not (np.isfinite(lap.data).all() and np.isfinite(mass).all() and np.isfinite(self.t)):
             raise ValueError(f"{what}: non-finite operators (degenerate input)")
-        from ._heat_ops import HeatFields
+        from .._heat_ops import HeatFields
 
         lap = lap.copy()
         lap.sort_indices()

@@ -15,9 +15,9 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from .graph import Graph, directed_edges, disjoint_union, random_rotation
-from .fields import FieldCache, FieldSpec, geometry_key
-from .nn.geopool import Hierarchy, build_hierarchy
+from ..fields.cache import FieldCache, FieldSpec, geometry_key
+from ..graph import Graph, directed_edges, disjoint_union, random_rotation
+from ..nn.geopool import Hierarchy, build_hierarchy
 
 __all__ = ["GeodesicStore", "MeshGeometry", "Batch", "split_meshes", "epoch_batches", "sample_mesh",
            "make_batch", "BatchDataset", "EpochSampler"]
@@ -37,7 +37,7 @@ class MeshGeometry:
 
     @cached_property
     def key(self) -> str:
-        """The field cache's key: the content hash (:func:`gegnn.fields.geometry_key`) of the stored mesh,
+        """The field cache's key: the content hash (:func:`gegnn.fields.cache.geometry_key`) of the stored mesh,
         for a point cloud the one its points were made from (so that every rank can tell duplicates
         apart from the store alone)."""
         return self.derived_from or geometry_key(self.vertices, self.faces)
@@ -116,7 +116,7 @@ class Sample:
     graph: Graph
     pairs: Tensor      # long (P, 2), local vertex indices
     distances: Tensor  # float (P,)
-    fields: Tensor | None = None  # float (N, C) landmark fields or spectral codes (gegnn.fields)
+    fields: Tensor | None = None  # float (N, C) landmark fields or spectral codes (gegnn.fields.cache)
 
 
 @dataclass
@@ -148,7 +148,7 @@ def sample_mesh(geometry: MeshGeometry, pairs: np.ndarray, distances: np.ndarray
                 fields: np.ndarray | None = None) -> Sample:
     """Pick ``num_pairs`` stored pairs (all if None or more than stored) and, with ``rotate``, rotate
     coordinates and normals by one random rotation (distances are invariant, the network is not).
-    ``fields``: the mesh's fields (N, C) for a model that reads them (:mod:`gegnn.fields`)."""
+    ``fields``: the mesh's fields (N, C) for a model that reads them (:mod:`gegnn.fields.cache`)."""
     v, n = geometry.vertices, geometry.normals
     if rotate:
         r = random_rotation(rng).astype(np.float32)
@@ -181,13 +181,13 @@ class BatchDataset(torch.utils.data.Dataset):
         num_pairs: pairs per mesh (None: all stored pairs).
         rotate: random rotation augmentation.
         levels, sigma_c, sigma_n: the model's GeoPool settings.
-        fields: the per-vertex fields the model reads (:class:`gegnn.fields.FieldSpec`; None: none).
+        fields: the per-vertex fields the model reads (:class:`gegnn.fields.cache.FieldSpec`; None: none).
             Training draws one of ``fields.draws`` choices (seeds: landmark draws) per (epoch, mesh) as
             augmentation; validation uses seed 0, as ``GeGnn.embed`` does.
-        field_cache: a :class:`gegnn.fields.FieldCache` path the fields are read from (training fills it
+        field_cache: a :class:`gegnn.fields.cache.FieldCache` path the fields are read from (training fills it
             first); fields missing there, or without a cache, are computed per use.
         cloud: for a point-cloud model, k: each mesh's vertices are read as a point cloud, its projected
-            points, graph and normals made from them alone (:func:`gegnn.pointcloud.cloud_graph`); 0: the
+            points, graph and normals made from them alone (:func:`gegnn.fields.pointcloud.cloud_graph`); 0: the
             mesh's own.
     """
 
@@ -240,7 +240,7 @@ class BatchDataset(torch.utils.data.Dataset):
         points, graph and normals of its vertices alone (faces kept; the stored mesh's key)."""
         if not self.cloud:
             return stored
-        from .pointcloud import cloud_graph
+        from ..fields.pointcloud import cloud_graph
         c = cloud_graph(stored.vertices.astype(np.float64), self.cloud)
         return MeshGeometry(c.points.astype(np.float32), c.normals.astype(np.float32), c.edges, stored.faces,
                             stored.key)

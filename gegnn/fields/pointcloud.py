@@ -15,11 +15,11 @@ r"""Point clouds as GeGnn inputs: the graph, the normals and the landmark fields
   :math:`1 - |n_i \cdot n_j|` (Hoppe et al. 1992), each part's tree rooted at its point farthest
   from the part's centroid, whose normal points away from it (outwards on a closed surface).
 * **Landmark fields**: farthest-point landmarks on every part of the graph, by shortest paths along the
-  surface neighbours below (:func:`gegnn.landmarks.graph_farthest_points`), and their distance fields by
+  surface neighbours below (:func:`gegnn.fields.landmarks.graph_farthest_points`), and their distance fields by
   the point-cloud heat method (potpourri3d's ``PointCloudHeatSolver``: the heat method on the tufted
   Laplacian of the points' local Delaunay triangulations, Sharp and Crane 2020; computed by
-  :mod:`gegnn.cloud_heat`), all solved together. (Meshes take each next landmark from the heat fields
-  so far, :mod:`gegnn.landmarks`, which keeps the fields one after the other; along the graph the
+  :mod:`gegnn.fields.cloud_heat`), all solved together. (Meshes take each next landmark from the heat fields
+  so far, :mod:`gegnn.fields.landmarks`, which keeps the fields one after the other; along the graph the
   validation clouds' errors stay within 0.02 points of that, at 8k points the fields take 0.1 s instead
   of 0.2 s.) Each point's local triangulation
   from neighbours near its tangent plane (:func:`surface_neighbors`), not across a gap to a nearby part
@@ -37,7 +37,7 @@ import numpy as np
 
 from geodata.mesh import label_groups
 
-from . import threads
+from .. import threads
 from .landmarks import LandmarkFields, graph_farthest_points, landmark_columns
 
 __all__ = ["CloudGraph", "cloud_graph", "mls_project", "surface_neighbors", "knn_edges", "graph_parts",
@@ -106,7 +106,7 @@ def mls_project(points: np.ndarray, k: int = MLS_K) -> np.ndarray:
     (fewer: all of them are used). Compiled (``src/cloud_ops.cpp``), in blocks of rows on torch's threads."""
     from scipy.spatial import cKDTree
 
-    from ._cloud_ops import mls_project as project
+    from .._cloud_ops import mls_project as project
 
     points = np.ascontiguousarray(points, dtype=np.float64)
     k = min(k, len(points) - 1)
@@ -118,7 +118,7 @@ def mls_project(points: np.ndarray, k: int = MLS_K) -> np.ndarray:
 def pca_normals(points: np.ndarray, nbrs: np.ndarray) -> np.ndarray:
     """Unit normals (N, 3), unoriented: the least-variance direction of each point with its neighbours (N, k)
     (about their mean; ``src/cloud_ops.cpp``)."""
-    from ._cloud_ops import plane_normals
+    from .._cloud_ops import plane_normals
 
     points = np.ascontiguousarray(points, dtype=np.float64)
     nbrs = np.ascontiguousarray(nbrs, dtype=np.int64)
@@ -195,7 +195,7 @@ def graph_parts(n: int, edges: np.ndarray) -> np.ndarray:
 def cloud_landmark_fields(points: np.ndarray, part: np.ndarray, k: int, seed: int = 0,
                           t_coef: float = CLOUD_T_COEF, normals: np.ndarray | None = None) -> LandmarkFields:
     """K farthest-point landmarks per part of the graph and their point-cloud heat-method distance fields
-    (float32 (N, K)), as :func:`gegnn.landmarks.landmark_fields` on a mesh: deterministic for a given
+    (float32 (N, K)), as :func:`gegnn.fields.landmarks.landmark_fields` on a mesh: deterministic for a given
     cloud, ``k`` and ``seed``; parts of fewer than MIN_PART points, or on a line, get distance 0 (as a
     mesh's parts of fewer than 3 vertices). ``normals``: the cloud's own oriented unit normals, if it has them (see
     :func:`surface_neighbors`). The same as ``cloud_landmark_solver(points, part, t_coef, normals)(k, seed)``."""
@@ -207,7 +207,7 @@ def cloud_landmark_solver(points: np.ndarray, part: np.ndarray, t_coef: float = 
     """The heat method's row-by-row set-up on every part of the graph (surface neighbours, local
     triangulations: on all of torch's threads), and a function ``(k, seed) -> LandmarkFields`` giving
     :func:`cloud_landmark_fields` from it: the covers and factorizations on its first call (one thread),
-    then farthest-point landmarks along the surface neighbours (:func:`gegnn.landmarks.graph_farthest_points`)
+    then farthest-point landmarks along the surface neighbours (:func:`gegnn.fields.landmarks.graph_farthest_points`)
     and their fields all together, on torch's threads."""
     n_parts = int(part.max()) + 1
     groups = label_groups(part, n_parts)
@@ -256,7 +256,7 @@ def surface_neighbors(points: np.ndarray, k: int = HEAT_K, cone_deg: float = CON
     a thin wall face away from each other. Needs more than 6k points (fewer: all)."""
     from scipy.spatial import cKDTree
 
-    from ._cloud_ops import cone_neighbors
+    from .._cloud_ops import cone_neighbors
 
     points = np.ascontiguousarray(points, dtype=np.float64)
     given = np.zeros((0, 3)) if normals is None else np.ascontiguousarray(normals, dtype=np.float64)
@@ -282,7 +282,7 @@ def _cloud_field(points: np.ndarray, t_coef: float, normals: np.ndarray | None =
     30 nearest where those would split the part) and local triangulations now, row by row on torch's
     threads; then the edges (E, 2) of the landmarks' graph (each point to those neighbours), and a
     function building ``distances(sources) -> (N, len(sources))`` from them
-    (:class:`gegnn.cloud_heat.CloudHeatDistance`'s cover, flips and factorizations, on one thread), or
+    (:class:`gegnn.fields.cloud_heat.CloudHeatDistance`'s cover, flips and factorizations, on one thread), or
     from potpourri3d itself on clouds that the method refuses (a degenerate neighbourhood)."""
     from .cloud_heat import CloudHeatDistance, local_triangulations
 

@@ -63,7 +63,7 @@ def log_map(topology, distance, center: int, radius: float | None = None, rings:
     d(center, v) <= ``radius``.
 
     Args:
-        topology: :class:`gegnn.paths.SurfaceTopology` of the mesh.
+        topology: :class:`gegnn.queries.paths.SurfaceTopology` of the mesh.
         distance: ``f(i, j) -> distances`` for index arrays (e.g. :meth:`gegnn.Embedding.distance`).
         center: vertex index.
         radius: in the mesh's units; None: every vertex of the center's part.

@@ -1,6 +1,6 @@
 """The per-vertex fields a model's decoder reads besides the embeddings, computed from the mesh before the
-network runs: landmark distance fields (geodesic, :mod:`gegnn.landmarks`) or truncated spectral codes
-(biharmonic, :mod:`gegnn.spectral`); and their cache, shared by every loader worker and every rank.
+network runs: landmark distance fields (geodesic, :mod:`gegnn.fields.landmarks`) or truncated spectral codes
+(biharmonic, :mod:`gegnn.fields.spectral`); and their cache, shared by every loader worker and every rank.
 
 A landmark-guided model trains on one of a few landmark draws per (epoch, mesh) (an augmentation). The
 heat-method fields of one draw cost ~0.29 s at K = 128 on a 5k-vertex mesh (one CPU thread), twice
@@ -41,7 +41,7 @@ LANDMARK_DRAWS = 4  # landmark choices per training mesh (augmentation; each com
 class FieldSpec:
     """Which fields: ``"landmark"`` (K heat-method landmark distance fields per component) or
     ``"spectral"`` (m spectral modes and the tail scale), and K or m; ``cloud``: the k of a point-cloud
-    model's neighbour graph, whose landmark fields come from the points alone (:mod:`gegnn.pointcloud`),
+    model's neighbour graph, whose landmark fields come from the points alone (:mod:`gegnn.fields.pointcloud`),
     0 for a mesh model."""
 
     kind: str
@@ -75,7 +75,7 @@ class FieldSpec:
 
     def compute(self, vertices: np.ndarray, faces: np.ndarray, seed: int = 0) -> np.ndarray:
         """The fields of one mesh, float32 (N, K) or (N, m + 1); for a point-cloud model, of its vertices as
-        a point cloud (faces unused), the points of :func:`gegnn.pointcloud.cloud_graph` (projected)."""
+        a point cloud (faces unused), the points of :func:`gegnn.fields.pointcloud.cloud_graph` (projected)."""
         return self.compute_draws(vertices, faces, [seed])[0]
 
     def compute_draws(self, vertices: np.ndarray, faces: np.ndarray, seeds) -> list[np.ndarray]:

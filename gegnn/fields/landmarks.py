@@ -15,7 +15,7 @@ equally far vertices apart, give the same landmarks on every solver). Point clou
 their neighbour graph instead (:func:`graph_farthest_points`, shortest paths), so that all fields are
 then solved together, on all threads.
 
-The fields are potpourri3d's robust heat method, computed by :mod:`gegnn.heat` (the same fields to
+The fields are potpourri3d's robust heat method, computed by :mod:`gegnn.fields.heat` (the same fields to
 solver rounding, ~1e-14 relative; on the 19 validation meshes the same landmarks and float32 fields bit
 for bit) on parts of at least HEAT_MIN_VERTICES vertices when at least HEAT_MIN_FIELDS fields are
 asked for, by potpourri3d's solver elsewhere (there its smaller setup wins). Sampling is sequential
@@ -131,7 +131,7 @@ def landmark_solver(vertices, faces, k: int, t_coef: float = T_COEF) -> Callable
 
 def _heat_field(vertices, faces, t_coef: float, fields: int):
     """``field(source) -> (N,)``: the distance field of one source vertex by potpourri3d's robust heat
-    method, computed by :class:`gegnn.heat.HeatDistance` (the same fields to solver rounding) where that
+    method, computed by :class:`gegnn.fields.heat.HeatDistance` (the same fields to solver rounding) where that
     pays: its setup costs more than potpourri3d's (flips in Python), each field less (0.7 against 2.4 ms
     at 5k vertices), so from HEAT_MIN_VERTICES vertices and HEAT_MIN_FIELDS fields. potpourri3d itself
     on smaller parts and on meshes that HeatDistance does not cover (non-manifold edges, faces
@@ -167,8 +167,8 @@ def graph_farthest_points(points: np.ndarray, edges: np.ndarray, k: int, first: 
     ``edges`` (E, 2) between the points (N, 3), each as long as its segment: each next landmark the point
     farthest from all before it (ties as in :func:`farthest_point_fields`; src/farthest_points.cpp).
     Unlike :func:`farthest_point_fields` it needs no field to choose the next, so all K fields can then be
-    computed together (:meth:`gegnn.heat.HeatSolver.distances`)."""
-    from ._farthest_points import farthest_points
+    computed together (:meth:`gegnn.fields.heat.HeatSolver.distances`)."""
+    from .._farthest_points import farthest_points
 
     return farthest_points(np.ascontiguousarray(points, dtype=np.float64),
                            np.ascontiguousarray(edges, dtype=np.int64).reshape(-1, 2), k, first, TIE)

@@ -1,7 +1,7 @@
 """One self-contained HTML page of a mesh, or of a point cloud, and its learned distance fields (``gegnn view``).
 
 The page carries the mesh (or the cloud: its points drawn as discs of about their spacing, lit by their
-normals), the per-vertex codes of one forward pass (:class:`gegnn.embedding.Embedding`)
+normals), the per-vertex codes of one forward pass (:class:`gegnn.queries.embedding.Embedding`)
 and the decoder's weights, and decodes the field of any clicked vertex itself, with the same formulas as
 :mod:`gegnn.decoders` (``assets/viewer.js``): the constant-time query, one per vertex, in the browser. It
 needs no network and no server (the script is inlined), so it opens from a laptop's disk, from a copy of a
@@ -20,10 +20,10 @@ from torch import nn
 
 from geodata.mesh import Mesh, vertex_components
 
-from .decoders import MAX_LOG_RATIO, DistanceDecoder, LandmarkDecoder, SpectralDecoder
+from ..decoders import MAX_LOG_RATIO, DistanceDecoder, LandmarkDecoder, SpectralDecoder
+from ..fields.spectral import S_MAX
+from ..metrics import METRIC_EPS
 from .render import POINT_DISC, UP_AXES, default_view, point_spacing, up_axis
-from .spectral import S_MAX
-from .train import METRIC_EPS
 
 __all__ = ["view_page", "decoder_spec"]
 
@@ -59,7 +59,7 @@ def _colormap(name: str) -> dict:
 def view_page(emb, *, title: str, meta: str = "", sources=(0,), exact: dict | None = None,
               file_index: np.ndarray | None = None, up: str | None = None, dtype: str = "float32",
               normals: np.ndarray | None = None) -> str:
-    """The HTML page of ``emb`` (an :class:`~gegnn.embedding.Embedding` with its mesh, or of a point cloud:
+    """The HTML page of ``emb`` (an :class:`~gegnn.queries.embedding.Embedding` with its mesh, or of a point cloud:
     its points and parts, as a point-cloud model's ``embed`` gives it).
 
     Args:
@@ -69,7 +69,7 @@ def view_page(emb, *, title: str, meta: str = "", sources=(0,), exact: dict | No
             error) when that vertex is the source.
         file_index: the file's number of each mesh vertex, shown instead of the mesh's (None: the mesh's,
             e.g. for a remeshed file).
-        up: the up axis (a key of UP_AXES; default :func:`gegnn.render.up_axis`); the camera turns about it.
+        up: the up axis (a key of UP_AXES; default :func:`gegnn.pictures.render.up_axis`); the camera turns about it.
         dtype: of the codes in the page: "float32", or "float16" for half the size (distances then move
             by ~1e-3 relative).
         normals: a cloud's normals (N, 3), for the light only (either sign); estimated where None (the
@@ -87,7 +87,7 @@ def view_page(emb, *, title: str, meta: str = "", sources=(0,), exact: dict | No
     toward = default_view(vertices, faces, up).rotation[2]
     horizontal = toward - (toward @ u) * u
     if cloud and normals is None:
-        from .pointcloud import unoriented_normals
+        from ..fields.pointcloud import unoriented_normals
         normals = unoriented_normals(vertices)
     data = {
         "vertices": _blob(vertices, "float32"),
@@ -108,7 +108,7 @@ def view_page(emb, *, title: str, meta: str = "", sources=(0,), exact: dict | No
                    "center": ((vertices.min(axis=0) + vertices.max(axis=0)) / 2).tolist()},
         "luts": {"viridis": _colormap("viridis"), "magma": _colormap("magma")},
     }
-    assets = files("gegnn") / "assets"
+    assets = files("gegnn.pictures") / "assets"
     return Template((assets / "viewer.html").read_text(encoding="utf-8")).substitute(
         title=html.escape(title), meta=html.escape(meta), item="point" if cloud else "vertex",
         data=json.dumps(data, separators=(",", ":")).replace("</", "<\\/"),

@@ -3,7 +3,7 @@
 
 A matrix is written tile by tile into a :class:`MatrixFile` (``.npy`` or a chunked ``.zarr`` array), so a
 50k-vertex mesh's 2.5e9 entries never sit in memory. Three sources fill it: the model
-(:meth:`gegnn.embedding.Embedding.matrix`), the exact solver of the model's distance (geodesic: one field
+(:meth:`gegnn.queries.embedding.Embedding.matrix`), the exact solver of the model's distance (geodesic: one field
 per row by window propagation, on every core; biharmonic: :mod:`geodata.biharmonic`) and the heat method
 (potpourri3d, one field per row: the loop its users write). Rows and columns are the file's vertices;
 pairs with no distance (a vertex used by no face, or two separate parts of the mesh) are NaN.
@@ -21,7 +21,7 @@ import numpy as np
 
 from geodata.mesh import Mesh
 
-from .query import require_edge_manifold
+from ..fields.exact import require_edge_manifold
 
 __all__ = ["MatrixFile", "FileMatrix", "exact_rows", "heat_rows", "ROW_BLOCK"]
 

@@ -1,0 +1,4 @@
+"""``python -m gegnn.cli`` (torchrun ``-m gegnn.cli`` too): the ``gegnn`` command."""
+from . import main
+
+main()

@@ -1,0 +1,23 @@
+"""Options and arguments shared by the commands."""
+from __future__ import annotations
+
+import click
+
+from ..model import PRETRAINED
+from ..pictures.render import UP_AXES
+
+MODEL_ARG = dict(nargs=-1, required=True, type=click.Path(dir_okay=False), metavar="[CHECKPOINT|NAME] MESH")
+UP_OPTION = click.option("--up", type=click.Choice(["auto", *UP_AXES]), default="auto", show_default=True,
+                         callback=lambda ctx, param, value: None if value == "auto" else value,
+                         help="The mesh's up axis in pictures (auto: +y or +z, by how the mesh stands).")
+PREPARE_OPTION = click.option("--prepare", is_flag=True, help="Run the geodata pipeline first (watertight, remesh "
+                              "to ~5k vertices: the meshes the model was trained on).")
+DEVICE_OPTION = click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True)
+PRECISION_OPTION = click.option(
+    "--precision", type=click.Choice(["fp32", "bf16", "auto"]), default="fp32", show_default=True,
+    help="Network and decoder precision. bf16: 1.6x faster (measured) where the hardware has native bf16 "
+         "(AVX512-BF16 or AMX CPUs, CUDA GPUs from compute capability 8.0), slower where it is emulated, "
+         "distances within ~1%. auto: bf16 only where it is native.")
+SIZE_OPTION = click.option("--size", default=480, show_default=True, help="Pixels across a rendered mesh (PNG).")
+PRETRAINED_HELP = ("Use a model shipped in the package instead of CHECKPOINT: the most accurate one, or NAME "
+                   f"({', '.join(repr(name) for name in PRETRAINED)}).")

@@ -1,0 +1,343 @@
+"""``gegnn query``: predicted (and exact) distances on a user's mesh or point cloud, as files or pictures."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from .inputs import _embed_cloud, _load_cloud, _load_mesh, _load_model, _model_and_meshes, _model_config, _output_suffix
+from .options import DEVICE_OPTION, MODEL_ARG, PRECISION_OPTION, PREPARE_OPTION, PRETRAINED_HELP, SIZE_OPTION, UP_OPTION
+
+
+@click.command(context_settings={"max_content_width": 100})
+@click.argument("files", **MODEL_ARG)
+@click.option("--pretrained", is_flag=True, help=PRETRAINED_HELP)
+@click.option("--source", type=int, help="Source vertex index (the file's own numbering).")
+@click.option("--pairs", "pairs_csv", type=click.Path(exists=True, dir_okay=False),
+              help="Answer the pairs of this CSV (two integer columns i,j; a header is allowed).")
+@click.option("--points", "points_file", type=click.Path(exists=True, dir_okay=False),
+              help="Distances between points anywhere on the surface: xyz in a .npy array (P, 3) or a CSV x,y,z "
+                   "(a header is allowed), in the mesh's units; each is moved to the closest surface point.")
+@click.option("-o", "--output", type=click.Path(dir_okay=False),
+              help="With --source: field.npy (per file vertex), field.ply (colored mesh) or field.png "
+                   "(rendered). With --pairs: a CSV i,j,distance (default: stdout). With --points: the "
+                   "(P, P) matrix as .npy or .csv (default: stdout).")
+@click.option("--exact", is_flag=True, help="Also compute the exact field (geodata's exact solver of the distance "
+                                            "the model predicts: geodesic or biharmonic) and report the error; a "
+                                            "PNG shows predicted | exact | relative error.")
+@click.option("--mesh", "cloud_mesh", type=click.Path(exists=True, dir_okay=False),
+              help="For a point-cloud model: the surface the cloud was taken from; with --exact, the exact field "
+                   "on it from the source point, read at every point.")
+@click.option("--path", "path_to", type=int, metavar="J",
+              help="Trace the geodesic path from --source to vertex J on the predicted field (a PNG draws "
+                   "it); with --exact also potpourri3d's exact edge-flip path, and the lengths of both.")
+@PREPARE_OPTION
+@DEVICE_OPTION
+@PRECISION_OPTION
+@UP_OPTION
+@SIZE_OPTION
+def query(files, pretrained, source, pairs_csv, points_file, output, exact, cloud_mesh, path_to, prepare, device,
+          precision, up, size):
+    """Distances on MESH (OBJ/OFF/PLY/STL/GLB, any units) predicted by CHECKPOINT or --pretrained: geodesic,
+    or biharmonic with a biharmonic model (--pretrained biharmonic).
+
+    \b
+    Examples:
+      gegnn query --pretrained bunny.obj --source 0 -o field.png
+      gegnn query --pretrained bunny.obj --source 0 --exact -o compare.png
+      gegnn query --pretrained bunny.obj --source 0 --path 1234 --exact -o path.png
+      gegnn query --pretrained paper bunny.obj --source 0 --exact -o compare.png
+      gegnn query --pretrained biharmonic bunny.obj --source 0 --exact -o compare.png
+      gegnn query runs/a/best.safetensors bunny.obj --pairs pairs.csv -o distances.csv
+      gegnn query --pretrained bunny.obj --points clicks.csv --exact -o distances.npy
+      gegnn query --pretrained points scan.xyz --pairs pairs.csv -o distances.csv
+
+    Distances are in the mesh's units. The PLY and PNG show the mesh the network ran on (with
+    --prepare, the remeshed one); .npy and CSV outputs use the file's vertex numbering. A point-cloud
+    model (--pretrained points) reads a cloud (.xyz .txt .pts .csv .npy .ply) instead of MESH and answers
+    --source or --pairs in the file's point numbering.
+    """
+    import numpy as np
+
+    from geodata.mesh import MeshError
+
+    from ..queries.files import read_pairs
+
+    model_spec, (mesh_path,) = _model_and_meshes(files, pretrained)
+    if _model_config(model_spec, pretrained).points:
+        if (source is None) == (pairs_csv is None) or points_file or path_to is not None or prepare:
+            raise click.UsageError("a point-cloud model answers --source I (with --exact --mesh MESH to compare) "
+                                   "or --pairs FILE")
+        if exact and pairs_csv:
+            raise click.UsageError("--exact goes with --source (it compares whole fields)")
+        if pairs_csv:
+            _output_suffix(output, (".csv",))
+            return _query_cloud_pairs(model_spec, pretrained, mesh_path, pairs_csv, output, device, precision)
+        return _query_cloud(model_spec, pretrained, mesh_path, source, output,
+                            _output_suffix(output, (".npy", ".ply", ".png")), exact, cloud_mesh, device, precision,
+                            up, size)
+    if cloud_mesh:
+        raise click.UsageError("--mesh goes with a point-cloud model (the file is the mesh here)")
+    if sum(x is not None for x in (source, pairs_csv, points_file)) != 1:
+        raise click.UsageError("give one of --source, --pairs or --points")
+    if exact and pairs_csv:
+        raise click.UsageError("--exact goes with --source or --points (it compares whole fields)")
+    if path_to is not None and source is None:
+        raise click.UsageError("--path goes with --source (the path runs from the source)")
+    if points_file:
+        return _query_points(model_spec, pretrained, mesh_path, points_file, output,
+                             _output_suffix(output, (".npy", ".csv")), exact, prepare, device, precision)
+    suffix = _output_suffix(output, (".csv",) if pairs_csv else (".npy", ".ply", ".png"))
+    qm = _load_mesh(mesh_path, prepare)
+    try:
+        pairs = read_pairs(pairs_csv) if pairs_csv else np.array([[source, source if path_to is None else path_to]])
+        net_pairs = qm.vertices(pairs)
+    except (MeshError, ValueError) as exc:
+        raise click.ClickException(f"{mesh_path}: {exc}") from None
+    src = int(net_pairs[0, 0])
+    config = _model_config(model_spec, pretrained)
+    kind = config.distance
+    exact_d = err = None
+    if exact and source is not None:  # before the network: the exact solver runs in a forked child
+        from ..fields.exact import exact_field
+        try:
+            exact_d = exact_field(qm.mesh, src, kind)
+        except MeshError as exc:
+            raise click.ClickException(f"{mesh_path}: --exact: {exc.reason}") from None
+
+    emb = _load_model(model_spec, pretrained, device).embed(qm.mesh.vertices, qm.mesh.faces, precision=precision)
+    if pairs_csv:
+        return _write_pairs(pairs, emb.distance(net_pairs[:, 0], net_pairs[:, 1]), output)
+
+    from ..fields.exact import source_part
+    from ..queries.files import resolution_note
+
+    name = Path(mesh_path).name
+    note = None if prepare else resolution_note(len(qm.mesh.vertices), config)
+    if note:
+        click.echo(f"{name}: note: {note}")
+    on, n_parts = source_part(qm.mesh, src)
+    # Other parts than the source's have no distance from it: NaN (grey in pictures).
+    field = np.where(on, emb.field(src), np.nan)
+    click.echo(f"{name}: {len(qm.mesh.vertices)} vertices; {kind} distance from {source}: "
+               f"min {np.nanmin(field):.4g} max {np.nanmax(field):.4g}")
+    if n_parts > 1:
+        click.echo(f"{name}: {n_parts} separate parts; source {source} is on a part of {int(on.sum())} vertices; "
+                   f"the other parts have no {kind} distance from it (NaN in .npy, grey in pictures, "
+                   "left out of the error)")
+    title = f"{name}, source {source}"
+    if exact_d is not None:
+        from ..queries.files import relative_errors
+        exact_d = np.where(on, exact_d, np.nan)
+        err = relative_errors(field, exact_d, qm.scale, src)
+        mre = float(np.nanmean(err))
+        click.echo(f"mean relative error vs exact: {100 * mre:.2f}% (median {100 * np.nanmedian(err):.2f}%, "
+                   f"max {100 * np.nanmax(err):.1f}%)" + (" on the source's part" if n_parts > 1 else ""))
+        title += f": MRE {100 * mre:.2f}%"
+    lines = []
+    if path_to is not None:
+        lines = _paths(emb, qm, src, int(net_pairs[0, 1]), path_to, exact_d, name)
+    top = float(np.nanmax(exact_d if exact_d is not None else field))
+    if suffix == ".npy":
+        np.save(output, qm.to_file(field))
+    elif suffix == ".ply":
+        import trimesh
+        trimesh.Trimesh(qm.mesh.vertices, qm.mesh.faces, vertex_colors=_field_colors(field, top),
+                        process=False).export(output)
+    elif suffix == ".png":
+        from ..pictures.render import Row, save_panels
+        save_panels(output, [Row(qm.mesh.vertices, qm.mesh.faces, src, _field_panels(field, exact_d, err, src, top),
+                                 lines)], suptitle=title, size=size, up=up)
+    if output:
+        click.echo(f"written {output}")
+
+
+def _query_points(model_spec, pretrained, mesh_path, points_file, output, suffix, exact, prepare, device,
+                  precision):
+    """``gegnn query --points``: the (P, P) matrix between surface points, optionally against exact distances
+    between the same points inserted as vertices."""
+    import numpy as np
+
+    from geodata.mesh import MeshError
+    from geodata.surface_points import insert_points, locate_points
+
+    from ..fields.exact import exact_fields
+    from ..queries.files import read_points, relative_errors
+
+    qm = _load_mesh(mesh_path, prepare)
+    name = Path(mesh_path).name
+    try:
+        points = read_points(points_file)
+    except (OSError, ValueError) as exc:
+        raise click.ClickException(str(exc)) from None
+    located = locate_points(qm.mesh, points)
+    click.echo(f"{name}: {len(points)} points, at most {located.offset.max():.3g} from the surface (each moved to "
+               "the closest surface point)")
+    kind = _model_config(model_spec, pretrained).distance
+    exact_d = None
+    if exact:  # before the network: the exact solver runs in a forked child
+        refined, vertex = insert_points(qm.mesh, located.face, located.bary)
+        try:
+            exact_d = exact_fields(refined, vertex, kind)[:, vertex]
+        except MeshError as exc:
+            raise click.ClickException(f"{name}: --exact: {exc.reason}") from None
+    emb = _load_model(model_spec, pretrained, device).embed(qm.mesh.vertices, qm.mesh.faces, precision=precision)
+    d = emb.surface_distance(located.face[:, None], located.bary[:, None], located.face[None], located.bary[None])
+    if exact_d is not None:
+        errors = np.concatenate([relative_errors(d[p], exact_d[p], qm.scale, p) for p in range(len(d))])
+        click.echo(f"mean relative error vs exact (points inserted as vertices): {100 * np.nanmean(errors):.2f}% "
+                   f"(median {100 * np.nanmedian(errors):.2f}%, max {100 * np.nanmax(errors):.1f}%)")
+    if suffix == ".npy":
+        np.save(output, d)
+    else:
+        text = "\n".join(",".join(f"{x:.6g}" for x in row) for row in d.tolist()) + "\n"
+        if output:
+            Path(output).write_text(text)
+        else:
+            click.echo(text, nl=False)
+    if output:
+        click.echo(f"written {output}")
+
+
+def _write_pairs(pairs, distances, output) -> None:
+    """A CSV i,j,distance of the pairs in the file's numbering, to ``output`` or stdout."""
+    lines = ["i,j,distance"] + [f"{i},{j},{x:.6g}" for (i, j), x in zip(pairs.tolist(), distances.tolist())]
+    if output:
+        Path(output).write_text("\n".join(lines) + "\n")
+        click.echo(f"{len(pairs)} distances written to {output}")
+    else:
+        click.echo("\n".join(lines))
+
+
+def _query_cloud_pairs(model_spec, pretrained, cloud_path, pairs_csv, output, device, precision):
+    """``gegnn query --pairs`` with a point-cloud model: the distance of every pair of the file's points, NaN
+    where a point is a far outlier or the two lie on different parts of the neighbour graph."""
+    import numpy as np
+
+    from ..queries.files import read_pairs
+
+    name = Path(cloud_path).name
+    try:
+        pairs = read_pairs(pairs_csv)
+    except ValueError as exc:
+        raise click.ClickException(str(exc)) from None
+    cloud, keep = _load_cloud(cloud_path, [], err=output is None)  # notes apart from a CSV on stdout
+    n = len(cloud.points)
+    bad = (pairs < 0) | (pairs >= n)
+    if bad.any():
+        row = int(np.flatnonzero(bad.any(axis=1))[0])
+        raise click.ClickException(f"{pairs_csv}: pair {row + 1}: point {pairs[bad][0]} out of range: {name} has "
+                                   f"{n} points")
+    emb = _embed_cloud(_load_model(model_spec, pretrained, device, clouds=True), cloud, keep, cloud_path, precision)
+    local = np.searchsorted(keep, pairs)
+    kept = (local < len(keep)) & (keep[np.minimum(local, len(keep) - 1)] == pairs)
+    local = np.where(kept, local, 0)
+    d = emb.distance(local[:, 0], local[:, 1])
+    same = kept.all(axis=1) & (emb.part[local[:, 0]] == emb.part[local[:, 1]])
+    d = np.where(same, d, np.nan)
+    if not same.all():
+        click.echo(f"{name}: note: {int((~same).sum())} pairs have no distance (NaN): a point far from all others, "
+                   "or the two on different parts of the neighbour graph", err=output is None)
+    _write_pairs(pairs, d, output)
+
+
+def _query_cloud(model_spec, pretrained, cloud_path, source, output, suffix, exact, mesh_path, device, precision,
+                 up, size):
+    """``gegnn query`` with a point-cloud model: the field of point ``source`` over the cloud, NaN at outliers
+    and on other parts of its neighbour graph; with --exact --mesh, against the exact field on the mesh."""
+    import numpy as np
+
+    from geodata.mesh import MeshError
+
+    from ..queries.files import relative_errors
+
+    name = Path(cloud_path).name
+    if exact and not mesh_path:
+        raise click.UsageError("--exact with a point cloud needs --mesh MESH, the surface it was taken from")
+    cloud, keep = _load_cloud(cloud_path, [source])
+    points, n = cloud.points, len(cloud.points)
+    model = _load_model(model_spec, pretrained, device, clouds=True)
+    emb = _embed_cloud(model, cloud, keep, cloud_path, precision)
+    part = emb.part
+    local = int(np.searchsorted(keep, source))
+    field = np.full(n, np.nan)
+    field[keep] = np.where(part == part[local], emb.field(local), np.nan)
+    n_parts = int(part.max()) + 1
+    click.echo(f"{name}: {n} points{'' if cloud.normals is None else ' with normals'}; {n_parts} part(s) in the "
+               f"{model.config.points}-neighbour graph; {model.config.distance} distance from point {source}: "
+               f"min {np.nanmin(field):.4g} max {np.nanmax(field):.4g}")
+    exact_d = err = None
+    if exact:
+        from ..fields.exact import exact_at_points
+        from ..queries.files import load_query_mesh
+        try:
+            qm = load_query_mesh(mesh_path)
+            exact_d, offset = exact_at_points(qm.mesh, points, source, model.config.distance)
+        except MeshError as exc:
+            raise click.ClickException(f"{mesh_path}: --exact: {exc.reason}") from None
+        err = relative_errors(field, exact_d, qm.scale, source)
+        click.echo(f"mean relative error vs exact on {Path(mesh_path).name}: {100 * np.nanmean(err):.2f}% (median "
+                   f"{100 * np.nanmedian(err):.2f}%; the points lie within {offset.max():.3g} of the surface)")
+    top = float(np.nanmax(exact_d if exact_d is not None else field))
+    if suffix == ".npy":
+        np.save(output, field)
+    elif suffix == ".ply":
+        import trimesh
+        trimesh.PointCloud(points, colors=_field_colors(field, top)).export(output)
+    elif suffix == ".png":
+        from ..fields.pointcloud import unoriented_normals
+        from ..pictures.render import Row, save_panels
+        lit = cloud.normals if cloud.normals is not None else unoriented_normals(points)
+        save_panels(output, [Row(points, None, source, _field_panels(field, exact_d, err, source, top), normals=lit)],
+                    size=size, up=up, suptitle=f"{name}, point {source}")
+    if output:
+        click.echo(f"written {output}")
+
+
+def _field_colors(field, top: float):
+    """RGBA uint8 (N, 4) of a per-vertex field for a coloured PLY: viridis over [0, top], grey where NaN."""
+    import matplotlib
+    import numpy as np
+
+    from ..pictures.render import UNREACHABLE
+    colors = matplotlib.colormaps["viridis"](np.nan_to_num(field / max(top, 1e-30)))
+    colors[np.isnan(field)] = UNREACHABLE
+    return (colors * 255).astype(np.uint8)
+
+
+def _field_panels(field, exact_d, err, source: int, top: float) -> list:
+    """The panels of a query's picture: predicted, and with an exact field, exact and the relative error
+    (0 at the source; NaN, grey, where there is no distance)."""
+    from ..pictures.render import Panel
+
+    panels = [Panel(field, "predicted", vmin=0, vmax=top)]
+    if exact_d is not None:
+        shown = err.copy()
+        shown[source] = 0.0
+        panels += [Panel(exact_d, "exact", vmin=0, vmax=top),
+                   Panel(shown, "relative error", "magma", "|pred - exact| / exact", 0, 0.1, isolines=0)]
+    return panels
+
+
+def _paths(emb, qm, src, dst, path_to, exact_d, name) -> list:
+    """Trace the predicted path (and with the exact field, the edge-flip one); report; lines to draw."""
+    try:
+        path = emb.path(src, dst)
+    except ValueError as exc:
+        raise click.ClickException(f"{name}: --path {path_to}: {exc}") from None
+    note = "" if path.traced else " (the field has a local minimum on the way: finished along edges)"
+    click.echo(f"{name}: path to {path_to}: {len(path.points)} points, length {path.length:.4g}, predicted "
+               f"distance {float(emb.distance(src, dst)):.4g}{note}")
+    lines = [(path.points, f"predicted path ({path.length:.3g})")]
+    if exact_d is not None and dst != src:
+        from geodata.geodesic import edge_flip_paths, polyline_length
+        try:
+            flip = edge_flip_paths(qm.mesh, [(src, dst)])[0]
+        except (RuntimeError, ValueError) as exc:
+            click.echo(f"{name}: no edge-flip path: {exc}")
+        else:
+            flip_len = polyline_length(flip)
+            click.echo(f"{name}: exact distance {exact_d[dst]:.4g}; edge-flip path length {flip_len:.4g}; "
+                       f"predicted path / edge-flip path {path.length / flip_len:.4f}")
+            lines.append((flip, f"exact path ({flip_len:.3g})"))
+    return lines

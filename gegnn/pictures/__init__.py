@@ -1,0 +1,4 @@
+"""Pictures of distance fields: PNG panels (:mod:`~gegnn.pictures.render`) and the interactive page
+(:mod:`~gegnn.pictures.viewer`, with its ``assets/``). Imports the decoders and fields below it, never the
+trainer or the command line (docs/architecture.md).
+"""
