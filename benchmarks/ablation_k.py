@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 import zarr
@@ -46,6 +47,7 @@ def main():
     ap.add_argument("store")
     ap.add_argument("models", nargs="*", default=[f"shipped@{k}" for k in (128, 256, 512, 1024)])
     ap.add_argument("--mesh", default="dragon-4af53808")
+    ap.add_argument("--out", help="also write the table to this file (for bench_results.py --landmarks-table)")
     args = ap.parse_args()
     print(f"CPU: {cpu_description()}", flush=True)
     g = zarr.open_group(f"{args.store}/meshes/{args.mesh}", mode="r")
@@ -66,6 +68,9 @@ def main():
                      f"{embed + query:.3f} | {heat / (embed + query):.1f}x |")
         print(lines[-1], flush=True)
     print("\n" + "\n".join(lines))
+    if args.out:
+        Path(args.out).write_text(f"CPU: {cpu_description()}; heat method for the 1M pairs: {heat:.2f} s.\n\n"
+                                  + "\n".join(lines) + "\n")
 
 
 if __name__ == "__main__":

@@ -156,6 +156,7 @@ def main():
     ap.add_argument("--meshes", help="only these meshes (comma-separated ids; default: all)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--ablation", help="markdown table of benchmarks/ablation_landmarks.py to include")
+    ap.add_argument("--landmarks-table", help="markdown of benchmarks/ablation_k.py --out FILE to include")
     ap.add_argument("--biharmonic", help="markdown table of benchmarks/bench_biharmonic_model.py --out FILE to "
                                          "include")
     ap.add_argument("--triangle", help="markdown table of benchmarks/bench_applications.py --only triangle "
@@ -205,6 +206,16 @@ HEADERS = ["GeGnn", "paper GeGnn", "landmark bound", "heat method", "Euclidean",
            "paper, damaged", "heat, damaged"]
 
 
+LANDMARKS_INTRO = (
+    "The landmark models at K landmark fields (`python benchmarks/ablation_k.py data/val.zarr NAME=CKPT[@K]... "
+    "--out FILE`): `vN@K` runs the weights of `gegnn-landmark-vN` with K fields at embed time (the decoder's "
+    "weights do not depend on K); `v2 recipe, K` is `pipelines/landmark/more_landmarks.sh data/ runs/ K`, "
+    "v1's weights trained on at K (K = 128: the same training without more landmarks, the control). "
+    "Validation MRE over all stored pairs, mean over meshes; embed (landmark fields + one forward pass, fp32) "
+    "and 1M random queries on the largest mesh, best of 3, against the heat method for the same pairs, all "
+    "in one run.")
+
+
 BIHARMONIC_INTRO = (
     "`GeGnn.pretrained(\"biharmonic\")` (32 spectral modes, their Weyl-law tail and a learned correction; "
     "[model card](model-card.md#gegnn-biharmonic-v1-biharmonic-distances-biharmonic)) against the exact "
@@ -228,6 +239,7 @@ def write_report(path, args, rows, times, speedup, largest, grid_ids):
         f"python benchmarks/bench_results.py {args.store}"
         + (f" --checkpoint {args.checkpoint}" if args.checkpoint else "")
         + (f" --ablation {args.ablation}" if args.ablation else "")
+        + (f" --landmarks-table {args.landmarks_table}" if args.landmarks_table else "")
         + (f" --triangle {args.triangle}" if args.triangle else "")
         + (f" --biharmonic {args.biharmonic}" if args.biharmonic else ""),
         "```",
@@ -268,6 +280,8 @@ def write_report(path, args, rows, times, speedup, largest, grid_ids):
                   "steps on one thread, a 3,000-step decoder warm-up where it has one, then one epoch of 91 "
                   "network steps at lr 1e-3; all stored pairs of the validation meshes, mean over meshes. "
                   "CPU min counts the warm-up.", "", Path(args.ablation).read_text().strip()]
+    if args.landmarks_table:
+        lines += ["", "## Landmark count K", "", LANDMARKS_INTRO, "", Path(args.landmarks_table).read_text().strip()]
     if args.triangle:
         lines += ["", "## Triangle inequality", "",
                   "A learned distance is not a metric by construction (the paper's limitations). Per mesh, 64 "

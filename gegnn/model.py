@@ -25,10 +25,12 @@ __all__ = ["GeGnnConfig", "GeGnn", "DistanceDecoder", "LandmarkDecoder", "Spectr
 
 # Shipped models, in gegnn/weights/, made by `gegnn export` (docs/model-card.md); the first is the default.
 PRETRAINED = {
-    "landmark": "gegnn-landmark-v1.safetensors",  # landmark-guided, the most accurate
+    "landmark": "gegnn-landmark-v2.safetensors",  # landmark-guided, K = 256: the most accurate
+    "landmark-v1": "gegnn-landmark-v1.safetensors",  # the previous default, K = 128
     "paper": "gegnn-classic-v1.safetensors",      # the paper's model (no landmarks)
     "biharmonic": "gegnn-biharmonic-v1.safetensors",  # biharmonic distances: spectral codes + Weyl tail
-    "points": "gegnn-points-v1.safetensors",      # point clouds: the landmark model's weights on a kNN graph
+    "points": "gegnn-points-v2.safetensors",      # point clouds: the landmark model's weights on a kNN graph
+    "points-v1": "gegnn-points-v1.safetensors",   # the previous one (gegnn-landmark-v1's weights, K = 128)
 }
 
 
@@ -256,8 +258,9 @@ class GeGnn(nn.Module):
 
         Args:
             name: a key of :data:`PRETRAINED`: ``"landmark"`` (the default: the most accurate geodesic
-                model), ``"paper"`` (the paper's model), ``"biharmonic"`` (biharmonic distances) or
-                ``"points"`` (point clouds: ``model.embed(points)``).
+                model, K = 256 landmarks), ``"landmark-v1"`` (the previous default, K = 128), ``"paper"``
+                (the paper's model), ``"biharmonic"`` (biharmonic distances), ``"points"`` (point clouds:
+                ``model.embed(points)``) or ``"points-v1"`` (the previous one).
         """
         with pretrained_file(name) as path:
             return cls.from_checkpoint(path, map_location)

@@ -156,7 +156,8 @@ def test_shipped_model_between_surface_points_on_a_plane_is_the_straight_line(sh
     i, j = rng.integers(0, len(v), 400), rng.integers(0, len(v), 400)
     line = np.linalg.norm(v[i] - v[j], axis=1)
     between_vertices = np.mean(np.abs(emb.distance(i, j) - line) / (line + 1e-3))
-    assert surface < 0.008 and surface < 1.3 * between_vertices  # measured (fp32, 2026-11-25, 2-core AMD EPYC): 0.47% and 0.53%
+    # measured (landmark-v2, fp32, 2026-11-26, 2-core AMD EPYC): 0.45% and 0.51% (v1: 0.47% and 0.53%)
+    assert surface < 0.007 and surface < 1.3 * between_vertices
 
 
 def test_shipped_model_between_surface_points_against_inserted_vertices(shipped):
