@@ -66,7 +66,7 @@ def section_queries(model, v, f, g, rows):
     error = mre(emb.distance(pairs[:, 0], pairs[:, 1]), dist)
     ours = embed + query
     rows += [
-        ("landmark fields (128 heat-method solves), part of the precomputation", fields, ""),
+        (f"landmark fields ({k} heat-method solves), part of the precomputation", fields, ""),
         ("precomputation: landmark fields + one forward pass (fp32)", embed, "target <= 0.3 s"),
         ("1M random queries, fused decoder (fp32)", query, f"{reference / query:.2f}x the torch path; target <= 0.25 s"),
         ("1M random queries, torch decoder path (reference)", reference, ""),
