@@ -273,7 +273,9 @@ def write_report(path, args, rows, times, speedup, largest, grid_ids):
     ]
     lines += [f"| {name} | {t:.4g} |" for name, t in times]
     lines += ["", f"Precomputation plus 1M random-pair queries: **{speedup:.1f}x** faster than the heat "
-                  "method for the same pairs (one heat field per distinct source; factorization included)."]
+                  "method for the same pairs, its time estimated as one factorization plus one source's field "
+                  "per distinct source (`benchmarks/bench_queries.py --only queries` times the heat method's "
+                  "actual loop over the same pairs: see the README's figure)."]
     if args.ablation:
         lines += ["", "## Ablation of the landmark-guided model", "",
                   "`bash pipelines/landmark/ablation.sh data/ runs/ablation`: every variant trains the same "
