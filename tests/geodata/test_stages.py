@@ -344,6 +344,16 @@ def test_normalize_is_one_uniform_scale_and_translation_of_its_input():
     assert s == pytest.approx(1 / ((v.max(axis=0) - v.min(axis=0)).max() / 2), rel=1e-6)
 
 
+def test_normalize_refuses_a_mesh_of_zero_extent_as_its_own_stage():
+    """No scale maps a point to [-1, 1]^3: a MeshError of the normalize stage, recorded as such in a store
+    (unreachable through prepare, whose earlier stages refuse such input; normalize is public)."""
+    from geodata.stages.normalize import normalize
+
+    with pytest.raises(MeshError) as caught:
+        normalize(Mesh(np.full((4, 3), 2.5), np.array([[0, 1, 2], [0, 2, 3]])))
+    assert (caught.value.stage, caught.value.reason) == ("normalize", "mesh has zero extent")
+
+
 def test_remesh_and_simplify_stay_on_the_input_surface():
     """Both ways within 1% of the bounding-box diagonal (Hausdorff, sampled): the remeshed and simplified
     surface is the input's, at about the vertex count asked for."""
