@@ -37,6 +37,13 @@ def test_fused_landmark_features_equal_the_torch_reference(embedding, euclidean,
     assert torch.equal(x2, fused) and torch.equal(lo2, f_lower)  # threads split pairs, not sums
     with pytest.raises(IndexError):
         landmark_features(codes, i, j.clone().fill_(len(codes)), 8, k, embedding, euclidean, x2, lo2, up2)
+    # codes that carry gradients take the torch path: the same features
+    grad_codes = codes.clone().requires_grad_(True)
+    with torch.enable_grad():
+        torch_path, (t_lower, t_upper) = dec.pair_inputs(grad_codes, i, j)
+    assert torch_path.requires_grad
+    torch.testing.assert_close(torch_path.detach(), fused, rtol=2e-6, atol=1e-6)
+    assert torch.equal(t_lower.detach(), f_lower) and torch.equal(t_upper.detach(), f_upper)
 
 
 def test_fused_decoder_distances_equal_the_module():

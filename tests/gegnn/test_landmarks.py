@@ -99,17 +99,45 @@ def test_point_codes_blend_the_corners_and_take_the_nearest_landmark_of_the_blen
     e = torch.tensor([[1.0, 0.0], [0.0, 2.0], [4.0, 4.0]])
     f = torch.tensor([[0.0, 3.0, 3.0], [3.0, 0.0, 3.0], [3.0, 3.0, 1.0]])
     pos = torch.tensor([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
-    corners = LandmarkDecoder.codes(e, f, pos).unsqueeze(0)
-    bary = torch.tensor([[0.5, 0.25, 0.25]])
-    got = dec.point_codes(corners, bary)[0]
+    corners = LandmarkDecoder.codes(e, f, pos).unsqueeze(0).repeat(2, 1, 1)
+    bary = torch.tensor([[0.5, 0.25, 0.25], [0.0, 0.0, 1.0]])  # and a second point: at corner 2
+    both = dec.point_codes(corners, bary)
+    assert both[1, d + k] == 1.0  # each point its own nearest landmark (not the minimum over points)
+    got = both[0]
     blended_f = [0.5 * 0 + 0.25 * 3 + 0.25 * 3, 0.5 * 3 + 0.25 * 0 + 0.25 * 3, 0.5 * 3 + 0.25 * 3 + 0.25 * 1]
     expected = [0.5 * 1 + 0.25 * 0 + 0.25 * 4, 0.5 * 0 + 0.25 * 2 + 0.25 * 4,   # embedding
                 *blended_f,                                                        # 1.5, 2.25, 2.5
                 1.5,                                                               # min of the blend (blend of the minima: 0.25)
                 0.25, 0.25, 0.0]                                                   # position
     torch.testing.assert_close(got, torch.tensor(expected))
-    on_corner = dec.point_codes(corners, torch.tensor([[0.0, 1.0, 0.0]]))[0]
+    on_corner = dec.point_codes(corners[:1], torch.tensor([[0.0, 1.0, 0.0]]))[0]
     torch.testing.assert_close(on_corner, corners[0, 1])  # a corner's own code
+
+
+def test_decoders_defaults_are_the_models():
+    """A decoder built with its defaults is the one a default config builds (the ratio form reading the
+    embedding and the straight line; the paper's MLP decoder)."""
+    from gegnn.decoders import DistanceDecoder
+
+    model = GeGnn(small_config(landmarks=4))
+    dec = LandmarkDecoder(model.config.embed_dim, 4, model.config.decoder_hidden)
+    assert (dec.kind, dec.embedding, dec.euclidean) == (model.distance.kind, True, True) == ("ratio", True, True)
+    assert (dec.mlp[-1].weight == 0).all()  # the ratio form starts as the bound
+    assert DistanceDecoder(8, 16).kind == "mlp" and DistanceDecoder(8, 16).mlp is not None
+
+
+def test_euclidean_decoder_is_the_embedding_distance():
+    """The paper's ablation decoder: ||e_i - e_j||, 0 on i = j with a finite gradient there."""
+    from gegnn.decoders import DistanceDecoder
+
+    dec = DistanceDecoder(8, 16, kind="euclidean")
+    a, b = torch.randn(50, 8), torch.randn(50, 8)
+    torch.testing.assert_close(dec(a, b), (a - b).norm(dim=1))
+    same = a.clone().requires_grad_(True)
+    d = dec(same, a)
+    assert (d.detach() < 1e-5).all() and not d.isnan().any()
+    d.sum().backward()
+    assert torch.isfinite(same.grad).all()
 
 
 def test_fields_are_deterministic_and_within_one_component():

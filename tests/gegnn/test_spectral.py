@@ -114,6 +114,35 @@ def test_decoder_is_symmetric_zero_on_the_diagonal_and_above_its_bound():
     assert (d >= bound * (1 - 1e-6)).all() and (d > bound).float().mean() > 0.5
 
 
+@pytest.mark.parametrize("embedding", [True, False])
+def test_decoder_features_and_output_by_hand(embedding):
+    """The decoder's inputs and output against the formula written out here: d_m^2, tau, r, s = r / sqrt(2 pi
+    tau), the Weyl estimate w = tau F(s), features [(e_i - e_j)^2, F, d_m^2 / (d_m^2 + w), log s] and
+    d^2 = d_m^2 + w exp(MLP); with or without the embedding (the --spectral-no-embedding ablation)."""
+    torch.manual_seed(0)
+    d, m = 4, 3
+    dec = SpectralDecoder(d, m, 8, embedding=embedding)
+    for p in dec.parameters():
+        torch.nn.init.normal_(p, std=0.3)
+    a = SpectralDecoder.codes(torch.randn(5, d), torch.rand(5, m + 1) + 0.1, torch.randn(5, 3))
+    b = SpectralDecoder.codes(torch.randn(5, d), torch.rand(5, m + 1) + 0.1, torch.randn(5, 3))
+    bound = ((a[:, d:d + m] - b[:, d:d + m]) ** 2).sum(dim=1)
+    tau = (a[:, d + m] + b[:, d + m]) / 2
+    r = torch.sqrt(((a[:, d + m + 1:] - b[:, d + m + 1:]) ** 2).sum(dim=1))
+    s = r / torch.sqrt(2 * np.pi * tau)
+    shape = weyl_shape(s, weyl_table())
+    w = tau * shape
+    feats = torch.stack([shape, bound / (bound + w), torch.log(s)], dim=1)
+    if embedding:
+        feats = torch.cat([(a[:, :d] - b[:, :d]) ** 2, feats], dim=1)
+    x, (got_bound, got_tail) = dec.inputs(a, b)
+    torch.testing.assert_close(x, feats)
+    torch.testing.assert_close((got_bound, got_tail), (bound, w))
+    t = dec.mlp(feats)
+    torch.testing.assert_close(dec(a, b), torch.sqrt(bound + w * torch.exp(t[:, 0])))
+    assert "weyl" not in dec.state_dict()  # a table of the code, not a weight: checkpoints do not carry it
+
+
 def test_model_embeds_and_queries_match_the_decoder():
     torch.manual_seed(0)
     model = GeGnn(small_config(spectral=16)).eval()
