@@ -13,7 +13,7 @@
 set -euo pipefail
 work=${1:?usage: mutation_test.sh WORKDIR MODULE.py... -- TEST_PATH...}
 shift
-modules=() tests=()
+modules=()
 while (( $# )) && [[ $1 != -- ]]; do modules+=("$1"); shift; done
 (( $# )) && shift
 tests=("$@")
@@ -46,7 +46,7 @@ EOF
 
 cd "$work"
 .venv/bin/python -m mutmut run > mutmut-run.log 2>&1 || { tail -30 mutmut-run.log; exit 1; }
-.venv/bin/python -m mutmut results --all true > mutmut-results.txt 2>&1 || .venv/bin/python -m mutmut results > mutmut-results.txt
+.venv/bin/python -m mutmut results --all true > mutmut-results.txt
 .venv/bin/python - "${modules[@]}" <<'EOF'
 import re, sys
 from collections import Counter
