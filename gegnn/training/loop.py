@@ -31,7 +31,7 @@ from .data import VAL_EPOCH, BatchDataset, EpochSampler, GeodesicStore, split_me
 from .devices import auto_workers, cpus_per_process, pick_device, set_deterministic
 from .warmup import warm_decoder
 
-__all__ = ["TrainConfig", "train", "relative_error", "evaluate_store", "lr_at"]
+__all__ = ["TrainConfig", "train", "evaluate_store", "lr_at"]
 
 METRICS = ["epoch", "step", "lr", "train_mre", "val_mre", "seconds"]
 # Options a resumed run takes from the command line ("landmark_cache": field_cache's name in older runs).
