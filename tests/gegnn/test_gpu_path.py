@@ -161,6 +161,24 @@ def test_validation_keeps_few_loader_workers(tiny_store, tmp_path, monkeypatch):
                                     pairs_per_mesh=100, workers=6), small_config())
     assert made == [gtrain.VAL_WORKERS, 6]  # validation, then training
 
+def test_loader_processes_end_with_the_run_whatever_holds_its_frames(tiny_store, tmp_path, monkeypatch):
+    """A run's persistent loader processes end when ``train`` returns, not when the garbage collector
+    frees the loaders: a kept exception (a library's cache of one suffices) holds the training frame,
+    and at exit torch 2.11 then waits 5 s for each process (the H100's 50 s exit)."""
+    import multiprocessing
+
+    kept = []
+
+    def plot_keeping_an_exception(run, rows):
+        try:
+            raise RuntimeError("kept")
+        except RuntimeError as e:
+            kept.append(e)  # its traceback holds this frame and the loop's frames below it
+    monkeypatch.setattr(gtrain, "plot_curves", plot_keeping_an_exception)
+    gtrain.train(gtrain.TrainConfig(store=tiny_store, run=str(tmp_path / "run"), epochs=1, batch_size=2,
+                                    pairs_per_mesh=100, workers=1), small_config())
+    assert kept and multiprocessing.active_children() == []
+
 
 # -- ScatterMax: ties share the gradient ---------------------------------------------------------------
 def _max_gradient(msg, index, grad_out, reference=False):
