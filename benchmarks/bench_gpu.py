@@ -126,9 +126,10 @@ def main():
     name = torch.cuda.get_device_name(device) if device.type == "cuda" else platform.processor() or platform.machine()
     print(f"## GeGnn on {name} (torch {torch.__version__}, CUDA {torch.version.cuda})")
     v, f = torus()
+    landmark, paper = GeGnn.pretrained(), GeGnn.pretrained("paper")
     models = {"GeGnn() (the paper's network, 256 channels)": GeGnn().eval(),
-              "pretrained landmark (64 channels, K = 128)": GeGnn.pretrained(),
-              "pretrained paper (64 channels)": GeGnn.pretrained("paper")}
+              f"pretrained landmark ({landmark.config.channels} channels, K = {landmark.config.landmarks})": landmark,
+              f"pretrained paper ({paper.config.channels} channels)": paper}
     section_speed(models, v, f, device, args.queries)
     section_agreement(GeGnn.pretrained(), v, f, device, args.queries)
     section_training(v, f, device, args.steps)

@@ -1,4 +1,4 @@
-"""The GPU check: on a machine with CUDA, in about ten minutes, everything this project claims of GPUs.
+"""The GPU check: on a machine with CUDA, in about seven minutes, everything this project claims of GPUs.
 
     scripts/gpu_check.sh [OUT] [--store STORE]     (OUT default gpu-check/; the report is OUT/REPORT.md)
 

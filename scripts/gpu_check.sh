@@ -1,3 +1,3 @@
 #!/usr/bin/env bash
 # The GPU check (scripts/gpu_check.py says what it runs): scripts/gpu_check.sh [OUT] [--store STORE]
-exec python "$(dirname "$0")/gpu_check.py" "$@"
+exec python3 "$(dirname "$0")/gpu_check.py" "$@"
