@@ -4,19 +4,18 @@ local Delaunay triangulations, Sharp and Crane 2020), to solver rounding, factor
 or many per solve.
 
 The library's discrete choices (which neighbours, each normal's sign, which local triangles, how the
-cover is glued) each move the fields by 1e-4 to 5e-2 when made differently, so every step replays its
-arithmetic, down to the order of floating-point sums where a choice rests on rounding (the normals and
-local triangulations compiled, ``src/local_triangulation.cpp``; the rest in NumPy):
+cover is glued) each move the fields by 1e-4 to 5e-2 when made differently, so every step makes them as
+the library does (the normals and local triangulations compiled, ``src/local_triangulation.cpp``; the
+rest in NumPy). Where rounding alone decides (exactly equal distances, mirror-symmetric neighbourhoods)
+the choice may be another; such clouds get other, equally valid fields:
 
-* **Neighbours**: the :math:`k = 30` nearest other points, nearest first, as nanoflann returns them:
-  scipy's k-d tree finds them; rows with two distances equal up to rounding are re-sorted by nanoflann's
-  :math:`((\Delta x^2 + \Delta y^2) + \Delta z^2)` and exact ties by the order nanoflann's search
-  reaches the points, replayed on a copy of its tree (10 points a leaf, split at the middle of the widest
-  side of the box, Hoare partitions).
+* **Neighbours**: the :math:`k = 30` nearest other points, nearest first: scipy's k-d tree finds them;
+  rows with two distances equal up to rounding are re-sorted by
+  :math:`((\Delta x^2 + \Delta y^2) + \Delta z^2)`, exact ties by point index (the library's nanoflann
+  orders exact ties as its search reaches them).
 * **Normals**: :math:`n_i` = the third left singular vector of the :math:`3 \times k` matrix of offsets
-  :math:`p_j - p_i` (not centred), sign included, as Eigen 3.3.9's ``JacobiSVD`` computes it (column-
-  pivoting Householder QR of the transpose, two-sided Jacobi sweeps on :math:`R^T`), with its SSE2
-  reduction and matrix-vector orders (the wheel has no AVX or FMA): bitwise equal on every cloud tried.
+  :math:`p_j - p_i` (not centred), sign included, by Eigen's ``JacobiSVD`` (the library's choice; Eigen
+  3.4 here, 3.3.9 in potpourri3d 1.4: the same normals to rounding on generic clouds).
   Tangent frame :math:`x = \widehat{t \times n}`, :math:`t = e_x` (:math:`e_y` where
   :math:`|n_x| > 0.9`), :math:`y = \widehat{n \times x}`; neighbour coordinates
   :math:`((q - p_i) - ((q - p_i) \cdot n)\,n) \cdot (x, y)`.
@@ -50,18 +49,19 @@ appear six times) count once with their multiplicity; both systems are factored 
 meshes (:class:`gegnn.fields.heat.HeatSolver`).
 
 Measured against potpourri3d 1.4.0 (``benchmarks/bench_cloud_heat.py``; one core of a 2-core AMD EPYC
-shared with other work, medians): on the 19 validation clouds (~5,000 points) every normal (bitwise)
-and local triangle is the library's, and the fields differ by at most 5e-14 of their largest value (up
-to 3e-10 on exactly symmetric synthetic clouds such as grids, 4e-9 with duplicate points: rounding, with
-the same normals and triangles). 2026-11-24, a slow spell of the machine (potpourri3d timed in the
-same run): setup 115 ms (potpourri3d 110 ms, plus 46 ms factoring on its first field); a field 0.80 ms
-one source at a time, 0.40 ms in a 128-source solve (potpourri3d 5.4 ms); 128 farthest-point landmark
-fields, setup included, 0.23 s (0.97 s), the same landmarks. bumpy_sphere(8000): setup 258 ms (396 +
-157), a field 2.2 ms, 1.6 ms batched (19 ms); 128 landmark fields 0.44 s (2.6 s).
+shared with other work, medians), 2026-11-26: on 17 of the 19 validation clouds (~5,000 points) the
+fields differ by at most 4.5e-14 of their largest value; on homer and spot_low_resolution, where 9 and 2
+points have exactly equidistant neighbours and 2 and 1 normals take the other sign, by 4.5e-4 and 5.6e-4.
+Exactly symmetric synthetic clouds differ more (a subdivided cube's vertices: 5.6e-2, with a mean error
+to the exact surface distances of 2.88% against the library's 2.48%; 800 points on a sphere with 45
+duplicates: 1.1e-3, 1.8813% against 1.8797% to the great circles; tests). Setup 126 ms (potpourri3d 109
+ms, plus 41 ms factoring on its first field); a field 0.90 ms one source at a time, 0.48 ms in a
+128-source solve (potpourri3d 5.8 ms); 128 farthest-point landmark fields, setup included, 0.27 s (1.0
+s), the same landmarks. bumpy_sphere(8000): setup 219 ms (377 + 134), a field 1.6 ms, 1.3 ms batched
+(15 ms); 128 landmark fields 0.59 s (2.5 s).
 
 Supported: finite points, more than :math:`k` of them, every point in some local triangle (ValueError
-otherwise). Replayed for x86-64 builds of potpourri3d (SSE2, libstdc++); other builds may round the
-normals differently, which moves fields only on exactly symmetric clouds.
+otherwise).
 """
 from __future__ import annotations
 
@@ -73,131 +73,25 @@ from .heat import DELAUNAY_EPS, HeatSolver, _Cover, _cotan_halves, gradient_dive
 __all__ = ["CloudHeatDistance", "local_triangulations", "K_NEIGHBORS"]
 
 K_NEIGHBORS = 30          # geometry-central's PointPositionGeometry::kNeighborSize
-LEAF_SIZE = 10            # nanoflann's default leaf_max_size
 MOLLIFY = 1e-5            # mollification margin, relative to the mean soup edge length
 
 
 # ---------------------------------------------------------------------------------------------------
-# Neighbours: nanoflann's k nearest, ties in its search order
+# Neighbours: the k nearest, ties by index
 # ---------------------------------------------------------------------------------------------------
 
 def _sq_dist(points: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
-    """nanoflann's L2_Simple_Adaptor: ((dx^2) + dy^2) + dz^2 with d = query - point."""
+    """Squared distances ((dx^2) + dy^2) + dz^2, d = query - point (as nanoflann's L2_Simple_Adaptor)."""
     d = points[rows] - points[cols]
     return (d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1]) + d[..., 2] * d[..., 2]
 
 
-class _KdTree:
-    """nanoflann 1.3.2's KDTreeSingleIndexAdaptor built over the points (only what orders a search's
-    equally distant results): per level, each point's inner node and side; per node, the split feature
-    and the extents of its two children along it; each point's slot in the reordered index."""
-
-    def __init__(self, points: np.ndarray, leaf_size: int = LEAF_SIZE):
-        n = len(points)
-        vind = np.arange(n)
-        starts, ends = np.array([0]), np.array([n])
-        lo, hi = points.min(0)[None], points.max(0)[None]
-        self.level_node, self.level_side = [], []
-        feats, lows, highs = [], [], []
-        n_nodes = 0
-        while len(starts):
-            inner = ends - starts > leaf_size
-            starts, ends, lo, hi = starts[inner], ends[inner], lo[inner], hi[inner]
-            if not len(starts):
-                break
-            count = ends - starts
-            node_of = np.repeat(np.arange(len(starts)), count)
-            pos = np.arange(count.sum()) + np.repeat(starts - np.concatenate([[0], np.cumsum(count)[:-1]]), count)
-            coords = points[vind[pos]]
-            seg = np.concatenate([[0], np.cumsum(count)[:-1]])
-            cmin = np.minimum.reduceat(coords, seg, axis=0)
-            cmax = np.maximum.reduceat(coords, seg, axis=0)
-            span = hi - lo
-            max_span = span.max(1)
-            spread = np.where(span > (1 - 0.00001) * max_span[:, None], cmax - cmin, -np.inf)
-            feat = np.argmax(spread, axis=1)                  # first of the widest eligible spreads
-            rows = np.arange(len(starts))
-            split = (lo[rows, feat] + hi[rows, feat]) / 2
-            fmin, fmax = cmin[rows, feat], cmax[rows, feat]
-            cut = np.where(split < fmin, fmin, np.where(split > fmax, fmax, split))
-            local = pos - starts[node_of]
-            lim1 = self._partition(points, vind, pos, node_of, local, feat, cut, np.zeros(len(starts), np.int64),
-                                   strict=True)
-            lim2 = self._partition(points, vind, pos, node_of, local, feat, cut, lim1, strict=False)
-            half = count // 2
-            idx = np.where(lim1 > half, lim1, np.where(lim2 < half, lim2, half))
-            mid = starts + idx
-            side = (pos >= mid[node_of]).astype(np.int8)
-            ids = n_nodes + node_of
-            level_node = np.full(n, -1, dtype=np.int64)
-            level_side = np.zeros(n, dtype=np.int8)
-            level_node[vind[pos]] = ids
-            level_side[vind[pos]] = side
-            self.level_node.append(level_node)
-            self.level_side.append(level_side)
-            v = points[vind[pos], feat[node_of]]
-            left = side == 0
-            low = np.full(len(starts), -np.inf)
-            high = np.full(len(starts), np.inf)
-            np.maximum.at(low, node_of[left], v[left])       # extent of child 1 along the split
-            np.minimum.at(high, node_of[~left], v[~left])    # and of child 2
-            feats.append(feat)
-            lows.append(low)
-            highs.append(high)
-            n_nodes += len(starts)
-            lo1, hi1 = lo.copy(), hi.copy()
-            hi1[rows, feat] = cut
-            lo2, hi2 = lo.copy(), hi.copy()
-            lo2[rows, feat] = cut
-            starts = np.concatenate([starts, mid])
-            ends = np.concatenate([mid, ends])
-            lo = np.concatenate([lo1, lo2])
-            hi = np.concatenate([hi1, hi2])
-        self.feat = np.concatenate(feats) if feats else np.zeros(0, np.int64)
-        self.low = np.concatenate(lows) if lows else np.zeros(0)
-        self.high = np.concatenate(highs) if highs else np.zeros(0)
-        self.slot = np.empty(n, dtype=np.int64)
-        self.slot[vind] = np.arange(n)
-
-    @staticmethod
-    def _partition(points, vind, pos, node_of, local, feat, cut, begin, strict):
-        """nanoflann's planeSplit pass over each node's slots from ``begin``: the i-th element from the
-        left that belongs right (>= cut, or > cut when not strict) swaps with the i-th from the right
-        that belongs left. Returns each node's count of left elements plus ``begin``."""
-        v = points[vind[pos], feat[node_of]]
-        goes_left = v < cut[node_of] if strict else v <= cut[node_of]
-        part = local >= begin[node_of]
-        n_left = np.bincount(node_of[part], weights=goes_left[part], minlength=len(cut)).astype(np.int64)
-        boundary = begin + n_left
-        a = part & ~goes_left & (local < boundary[node_of])            # ascending within a node
-        b = part & goes_left & (local >= boundary[node_of])
-        pa = pos[a]
-        bi = np.flatnonzero(b)
-        bi = bi[np.lexsort((-pos[bi], node_of[bi]))]                   # descending within a node
-        pb = pos[bi]
-        vind[pa], vind[pb] = vind[pb], vind[pa].copy()
-        return boundary
-
-    def visit_keys(self, points: np.ndarray, query: np.ndarray, cand: np.ndarray) -> np.ndarray:
-        """Order in which a search from points[query] reaches points[cand] (smaller first): the sides
-        taken against the search's preferred child along the path, then the slot within the leaf."""
-        key = np.zeros(cand.shape, dtype=np.int64)
-        for node, side in zip(self.level_node, self.level_side):
-            nd = node[cand]
-            inner = nd >= 0
-            ndc = np.where(inner, nd, 0)
-            f = self.feat[ndc]
-            val = points[query[:, None], f]
-            best = np.where((val - self.low[ndc]) + (val - self.high[ndc]) < 0, 0, 1)
-            key = 2 * key + (inner & (side[cand] != best))
-        return key * (len(points) + 1) + self.slot[cand]
-
-
 def _nearest(points: np.ndarray, k: int = K_NEIGHBORS) -> np.ndarray:
-    """(N, k): geometry-central's kNearestNeighbors, i.e. nanoflann's k + 1 nearest without the point
-    itself (without the last one if the point is not among them). scipy's k-d tree finds them; where
-    two of the k + 1 (or the k + 1-th and the next) are equally far to within rounding, the row is
-    re-sorted by nanoflann's squared distance and exact ties by nanoflann's search order."""
+    """(N, k): geometry-central's kNearestNeighbors, the k + 1 nearest without the point itself (without
+    the last one if the point is not among them), nearest first. scipy's k-d tree finds them; where two
+    of the k + 1 (or the k + 1-th and the next) are equally far to within rounding, the row is re-sorted
+    by the squared distance ((dx^2 + dy^2) + dz^2), exact ties by point index (nanoflann, the library's
+    k-d tree, orders them as its search reaches them: another order only on exactly symmetric clouds)."""
     from scipy.spatial import cKDTree
 
     n = len(points)
@@ -215,16 +109,9 @@ def _nearest(points: np.ndarray, k: int = K_NEIGHBORS) -> np.ndarray:
         extra *= 4                                            # a tie reaches past the candidates
     rows = np.flatnonzero(close[:, :want].any(1))
     if len(rows):
-        # The order of the first four neighbours sets the normal's sign, the boundary which point is
-        # the k-th, any other the normal's rounding (which decides between cocircular neighbours in
-        # symmetric clouds): replay nanoflann's order on these rows.
+        # The boundary decides which point is the k-th; the order, the normal's rounding.
         c = cand[rows]
-        d2 = _sq_dist(points, rows[:, None], c)
-        tied = (d2[:, 1:] == d2[:, :-1]).any(1)
-        keys = np.zeros_like(c)
-        if tied.any():
-            keys[tied] = _KdTree(points).visit_keys(points, rows[tied], c[tied])
-        cand[rows] = np.take_along_axis(c, _rowwise_lexsort(d2, keys), 1)
+        cand[rows] = np.take_along_axis(c, _rowwise_lexsort(_sq_dist(points, rows[:, None], c), c), 1)
     cand = cand[:, :want]
     is_self = cand == np.arange(n)[:, None]
     first_self = np.where(is_self.any(1), is_self.argmax(1), want - 1)
