@@ -1,28 +1,30 @@
-r"""Heat-method distances (Crane, Weischedel, Wardetzky 2013) as potpourri3d's robust solver computes them
-(``MeshHeatMethodDistanceSolver(V, F, t_coef, use_robust=True)``, i.e. geometry-central's
-``HeatMethodDistanceSolver`` on an intrinsic tufted cover, Sharp and Crane 2020), to solver rounding,
-factored once, for one source or many per solve.
+r"""The heat method (Crane, Weischedel, Wardetzky 2013) on an intrinsic tufted cover (Sharp and Crane
+2020), as potpourri3d computes it: for meshes its robust solver (``MeshHeatMethodDistanceSolver(V, F,
+t_coef, use_robust=True)``, here :class:`HeatDistance`), for point clouds its ``PointCloudHeatSolver``
+on the soup of the points' local triangles (:mod:`gegnn.fields.cloud_heat`). One core serves both:
 
-The operators live on an intrinsic triangulation of the edge lengths alone:
-
-* **Tufted cover**: every face twice, a front copy and an oppositely oriented back copy. Along an edge
-  of two faces the fronts are glued to each other and so are the backs (front to back where the faces
-  run the edge the same way); along a boundary edge a face's front is glued to its own back. The cover
-  is a closed surface on the same vertices; every operator below is summed over both copies.
+* **Tufted cover** of a triangle soup (a mesh's faces, or a cloud's local triangles with repeats): every
+  face twice, a front copy and an oppositely oriented back copy; around an edge of faces
+  :math:`h_0, \dots, h_{n-1}` (creation order) the sheets are glued cyclically in the order
+  :math:`h_0, h_{n-1}, \dots, h_1`, each face's free sheet to the next face's sheet of the other
+  orientation. On a mesh: along an edge of two faces the fronts are glued to each other and so are the
+  backs (front to back where the faces run the edge the same way); along a boundary edge a face's front
+  is glued to its own back. The cover is a closed surface on the same vertices.
 * **Mollification**: every length grows by :math:`\epsilon = \max(0, \max_{\text{corners}}
-  (l_c - l_a - l_b) + 10^{-5}\,\bar l)` (:math:`\bar l`: mean cover edge length), so every triangle
-  satisfies the triangle inequality with a margin.
+  (l_c - l_a - l_b) + 10^{-5}\,\bar l)`, so every triangle satisfies the triangle inequality with a
+  margin (:math:`\bar l`: the mean cover edge length on meshes, the mean soup edge length on clouds, as
+  the library).
 * **Intrinsic Delaunay flips**: an edge whose cotangent weight :math:`w_{ij} = \tfrac12(\cot\alpha +
   \cot\beta)` is below :math:`-10^{-6}` is flipped (its new length from laying out its two triangles),
-  from a FIFO queue that starts with every edge in order and re-queues the four edges around each flip.
-  A boundary edge is an ordinary edge of the cover: it flips when its opposite angle is obtuse enough.
-  Both copies are flipped, in geometry-central's order: where four vertices are cocircular (CAD meshes)
-  the mirrored copies re-queue edges in another order and can keep different diagonals, which the
-  fields see (1e-3 relative on a test prism), so nothing is assumed symmetric.
+  in rounds of face-disjoint flips (each round every such edge that has the smallest such index on both
+  its faces). The library flips from a FIFO queue; where the Delaunay triangulation is unique (generic
+  input) both end with the same triangles, where four vertices are cocircular they may keep other
+  diagonals, which the fields see (tests: meshes 1.6e-2 of the largest distance at most, clouds as
+  their module says).
 
 With :math:`L` (the flipped cover's cotangent Laplacian), :math:`M` (a third of each cover triangle's
 Heron area to each corner) and :math:`t = t_{coef}\,\bar l^2` (:math:`\bar l`: mean cover edge length
-*after* mollification and flips; a boundary edge counts once, any other edge twice):
+*after* mollification and flips):
 
 .. math::
     (M + tL)\,u = e_s, \qquad X_f = \frac{\nabla u}{|\nabla u|}\ (0 \text{ where } \nabla u = 0), \qquad
@@ -31,26 +33,24 @@ Heron area to each corner) and :math:`t = t_{coef}\,\bar l^2` (:math:`\bar l`: m
 :math:`(\nabla\!\cdot X)_i = \sum_{ij} w^f_{ij} \langle e_{ij}, X_f\rangle` over the cover's halfedges
 :math:`ij` of face f (:math:`w^f_{ij}`: half the cotangent opposite them; :math:`e_{ij}` in f's layout).
 The source's entry is 1, not a mass; the :math:`10^{-6} I` is absolute (not scaled with the mesh) and
-meets the cover's doubled :math:`L` (it acts as :math:`5 \cdot 10^{-7} I` on a closed mesh): both shape
-the fields and are kept. No clamping: d can be slightly negative near the source.
+meets the cover's doubled :math:`L`: both shape the fields and are kept. No clamping: d can be slightly
+negative near the source.
 
-Here the gradient and divergence are sparse matrices over the cover's distinct faces (a back copy that
-is still its front's mirror image is counted twice instead of computed again), both systems are
-factored by Eigen's SimplicialLLT (AMD order) and solved by src/heat_ops.cpp, sixteen sources at a time,
-the blocks spread over torch's threads, and the flips run in Python. 5,224-vertex closed mesh (2,164
-cover flips), one core of a 2-core EPYC (2026-11-24, ``benchmarks/bench_landmark_fields.py``): setup
-49 ms (potpourri3d ~40 ms; the flips are half of it), a field 0.5 ms one at a time (potpourri3d ~2 ms,
-60% of it its per-face loop).
+The operators are sparse matrices over the cover's distinct faces (identical triangles: same corners,
+bitwise equal lengths, such as a front and its back copy, count once with their multiplicity); both
+systems are factored by Eigen's SimplicialLLT (AMD order) and solved by src/heat_ops.cpp, sixteen
+sources at a time, the blocks spread over torch's threads. 5,224-vertex closed mesh (2,166 cover
+flips), one core of a 2-core EPYC (2026-11-26, ``benchmarks/bench_landmark_fields.py``): setup 41 ms
+(the library's queue replayed in Python, before: 62-78 ms in the same runs), a field 0.8 ms; 128
+farthest-point landmark fields 0.12 s (potpourri3d 0.28 s), the same landmarks and float32 fields. The
+fields of the 19 validation meshes are potpourri3d's to 5.2e-14 of their largest value.
 
-Supported: edge-manifold meshes (at most two faces an edge; any orientation, boundaries, slivers, zero
+Meshes supported: edge-manifold (at most two faces an edge; any orientation, boundaries, slivers, zero
 lengths) with finite coordinates and no face repeating a vertex. :func:`cover_problem` says why not
 (potpourri3d orders the faces around a non-manifold edge by its internal halfedge order).
 """
 from __future__ import annotations
 
-import heapq
-import math
-from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -58,7 +58,8 @@ import scipy.sparse as sp
 
 from .. import threads
 
-__all__ = ["HeatSolver", "HeatDistance", "cover_problem", "MOLLIFY", "DELAUNAY_EPS", "POISSON_SHIFT"]
+__all__ = ["HeatSolver", "HeatDistance", "cover_problem", "tufted_cover", "mollify", "flip_to_delaunay", "operators",
+           "MOLLIFY", "DELAUNAY_EPS", "POISSON_SHIFT"]
 
 MOLLIFY = 1e-5          # mollification margin, relative to the mean cover edge length
 DELAUNAY_EPS = 1e-6     # flip an edge whose cotangent weight is below -DELAUNAY_EPS
@@ -110,54 +111,68 @@ class _Cover:
     e_he: np.ndarray
     f_he: np.ndarray
     length: np.ndarray
+    soup_edges: int  # the soup's own edges come first; the rest glue its other sheets
 
 
-def _tufted_cover(vertices: np.ndarray, faces: np.ndarray) -> _Cover:
-    """Front halfedge 3f + c runs from corner c to c + 1, its back copy 3F + 3f + c from c + 1 to c.
-    Edges: the mesh's in order of first appearance, then a back edge per two-face edge, same order."""
+def tufted_cover(points: np.ndarray, faces: np.ndarray) -> _Cover:
+    """The tufted cover of a triangle soup in geometry-central's element order (:class:`_Cover`), lengths
+    not yet mollified: front halfedge 3f + c runs from corner c to c + 1, its back copy
+    3F + 3f + c the other way. Edges: the soup's (in order of first appearance) keep the pair
+    (h_0, h_1's back-or-front); then, edge by edge, the new edges glue h_0's other sheet to h_{n-1},
+    h_{n-1}'s to h_{n-2}, ..., h_2's to h_1 (each halfedge pair oppositely oriented)."""
     n_f = len(faces)
+    n_h = 3 * n_f
     tail = faces.reshape(-1)
     tip = faces[:, [1, 2, 0]].reshape(-1)
-    first, inverse = _edge_keys(faces, len(vertices))
-    if np.bincount(inverse).max() > 2:
-        raise ValueError("heat method: non-manifold edges")
-    order = np.argsort(first, kind="stable")
-    rank = np.empty_like(order)
-    rank[order] = np.arange(len(order))
-    edge_of = rank[inverse]                                   # mesh edge of each front halfedge
-    h1 = first[order]                                         # each mesh edge's first halfedge
-    h2 = np.full(len(h1), -1)
-    is_second = np.ones(3 * n_f, dtype=bool)
-    is_second[h1] = False
-    h2[edge_of[is_second]] = np.flatnonzero(is_second)        # its second face's halfedge, if any
-    interior = np.flatnonzero(h2 >= 0)
-    same = tail[h1[interior]] == tail[h2[interior]]           # both faces run the edge the same way
-    back = 3 * n_f
-    b2 = h2[interior]
-    pair_a = np.concatenate([h1, back + h1[interior]])
-    pair_b = back + np.concatenate([h1, b2])                  # boundary edges: front to its own back
-    pair_b[interior] = np.where(same, back + b2, b2)
-    pair_b[len(h1):] = np.where(same, b2, back + b2)
+    n = len(points)
+    key = np.minimum(tail, tip) * n + np.maximum(tail, tip)
+    by_key = np.argsort(key * n_h + np.arange(n_h))           # halfedges by edge, creation order within
+    k_sorted = key[by_key]
+    new_group = np.concatenate([[True], k_sorted[1:] != k_sorted[:-1]])
+    group_start = np.flatnonzero(new_group)
+    count = np.diff(np.append(group_start, n_h))
+    first = by_key[group_start]                               # each edge's first halfedge
+    edge_order = np.argsort(first, kind="stable")             # edges in order of first appearance
+    start = group_start[edge_order]
+    count = count[edge_order]
+    h0 = first[edge_order]
+    group_rank = np.empty(len(group_start), dtype=np.int64)
+    group_rank[edge_order] = np.arange(len(group_start))
+    soup_edge = np.empty(n_h, dtype=np.int64)
+    soup_edge[by_key] = group_rank[np.cumsum(new_group) - 1]
+    d = points[tail[h0]] - points[tip[h0]]
+    length = np.sqrt((d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]) + d[:, 2] * d[:, 2])  # Vector3's norm
+    # orientation relative to the edge's first halfedge; its true (T) and false (F) sheet
+    ids = np.arange(n_h)
+    positive = tail == tail[h0[soup_edge]]
+    sheet_t = np.where(positive, ids, n_h + ids)
+    sheet_f = np.where(positive, n_h + ids, ids)
+    # creation order h_0..h_{n-1} of each edge's halfedges: by_key[start + i]
+    h1 = by_key[np.where(count > 1, start + 1, start)]
+    extra = count - 1
+    e_new = np.repeat(np.arange(len(count)), extra)
+    i_new = np.arange(extra.sum()) - np.repeat(np.cumsum(extra) - extra, extra)
+    c_new = count[e_new]
+    f_i = by_key[start[e_new] + (c_new - i_new) % c_new]      # the i-th face around the edge: h_{(n-i) mod n}
+    f_next = by_key[start[e_new] + (c_new - i_new - 1) % c_new]
+    pair_a = np.concatenate([h0, sheet_f[f_i]])
+    pair_b = np.concatenate([sheet_f[h1], sheet_t[f_next]])
+    sib = np.empty(2 * n_h, dtype=np.int64)
+    sib[pair_a], sib[pair_b] = pair_b, pair_a
+    edge = np.empty(2 * n_h, dtype=np.int64)
+    edge[pair_a] = edge[pair_b] = np.arange(len(pair_a))
     step = np.repeat([[1, 2, 0], [2, 0, 1]], n_f, axis=0)    # next corner: c + 1 on fronts, c - 1 on backs
     nxt = (3 * np.arange(2 * n_f)[:, None] + step).ravel()
-    vert = np.concatenate([tail, tip])
-    sib = np.empty(len(nxt), dtype=np.int64)
-    sib[pair_a], sib[pair_b] = pair_b, pair_a
-    edge = np.empty(len(nxt), dtype=np.int64)
-    edge[pair_a] = edge[pair_b] = np.arange(len(pair_a))
-    d = vertices[tail[h1]] - vertices[tip[h1]]
-    length = np.sqrt(np.einsum("ij,ij->i", d, d))            # (x^2 + y^2) + z^2, as geometry-central
-    length = np.concatenate([length, length[interior]])       # a back edge has its front's length
-    return _Cover(nxt, vert, np.repeat(np.arange(2 * n_f), 3), sib, edge, pair_a, 3 * np.arange(2 * n_f), length)
+    return _Cover(nxt, np.concatenate([tail, tip]), np.repeat(np.arange(2 * n_f), 3), sib, edge, pair_a.copy(),
+                  3 * np.arange(2 * n_f), np.concatenate([length, length[e_new]]), len(h0))
 
 
-def _mollify(cover: _Cover, relative: float = MOLLIFY) -> None:
+def mollify(cover: _Cover, mean: float, relative: float = MOLLIFY) -> None:
     """Add one epsilon to every length so that each corner has l_a + l_b - l_c >= relative x mean."""
     la = cover.length[cover.edge]
     lb = la[cover.nxt]
     lc = lb[cover.nxt]
-    delta = cover.length.sum() / len(cover.length) * relative
-    cover.length += max(0.0, float(np.max(lc - la - lb + delta)))
+    cover.length += max(0.0, float(np.max(lc - la - lb + mean * relative)))
 
 
 def _cotan_halves(cover: _Cover) -> tuple[np.ndarray, np.ndarray]:
@@ -177,81 +192,61 @@ def _cotan_halves(cover: _Cover) -> tuple[np.ndarray, np.ndarray]:
     return area, half
 
 
-def _flip_to_delaunay(cover: _Cover, eps: float = DELAUNAY_EPS) -> int:
-    """geometry-central's flipToDelaunay, in place: the same queue, flips and arithmetic.
-
-    The queue starts with every edge; here that first pass evaluates only the edges that are not
-    Delaunay or whose triangles a flip has changed (the others would be popped without effect).
-    Half-cotangents are cached per halfedge and recomputed for the two new triangles of each flip.
-    ZeroDivisionError where a length or an area is 0 (geometry-central would go on with inf/nan)."""
+def flip_to_delaunay(cover: _Cover, eps: float = DELAUNAY_EPS) -> int:
+    """Intrinsic Delaunay flips in rounds, in place: each round flips, at once, every edge with cotangent
+    weight below -eps that has the smallest such index on both its faces; returns the flips made. Each
+    flip is geometry-central's (its layout arithmetic and halfedge updates, refused where the new length
+    is not finite or a vertex has degree 1); an edge refused waits until one of its faces changes."""
+    nxt, vert, face, sib, edge, e_he, f_he, length = (cover.nxt, cover.vert, cover.face, cover.sib, cover.edge,
+                                                      cover.e_he, cover.f_he, cover.length)
     _, half = _cotan_halves(cover)
-    first_pass = np.flatnonzero(half[cover.e_he] + half[cover.sib[cover.e_he]] < -eps).tolist()
-    if not first_pass:
-        return 0
-    # Memoryviews: element access at list speed, in place, with no conversion of the arrays.
-    nxt, vert, face, sib, edge, e_he, f_he, length, hc = (
-        memoryview(a) for a in (cover.nxt, cover.vert, cover.face, cover.sib, cover.edge, cover.e_he,
-                                cover.f_he, cover.length, half))
-
-    def refresh(h0):
-        """Half-cotangents of h0's triangle; h0 is its first halfedge (Heron from there)."""
-        h1 = nxt[h0]
-        h2 = nxt[h1]
-        a, b, c = length[edge[h0]], length[edge[h1]], length[edge[h2]]
-        s = (a + b + c) / 2.0
-        area4 = 4.0 * math.sqrt(max(0.0, s * (s - a) * (s - b) * (s - c)))
-        hc[h0] = (-a * a + b * b + c * c) / area4 / 2
-        hc[h1] = (-b * b + c * c + a * a) / area4 / 2
-        hc[h2] = (-c * c + a * a + b * b) / area4 / 2
-
-    def flip(e, ha1, hb1):
-        """Flip edge e (halfedges ha1, hb1) unless geometry-central would not; its four neighbours."""
-        ha2, hb2 = nxt[ha1], nxt[hb1]
-        ha3, hb3 = nxt[ha2], nxt[hb2]
-        # Lay out the quad (geometry-central's flippedEdgeLen): vertex 3 = (0, 0), 0 = (l30, 0), then
-        # 2 from l02, l23 and 1 from l01, l12; the new edge runs from 1 to 3.
-        l30 = length[edge[hb3]]
-        x2, y2 = _layout_from_origin(l30, length[e], length[edge[hb2]])
-        x1, y1 = _layout((x2, y2), (l30, 0.0), length[edge[ha2]], length[edge[ha3]])
-        new = math.sqrt(x1 * x1 + y1 * y1)
-        if not math.isfinite(new) or ha2 == hb1 or hb2 == ha1:
-            return ()
-        relink(nxt, vert, face, f_he, face[ha1], face[hb1], (ha1, ha2, ha3), (hb1, hb2, hb3))
-        length[e] = new
-        refresh(ha1)
-        refresh(hb1)
-        return edge[hb3], edge[ha2], edge[ha3], edge[hb2]
-
-    # Queue = [rest of the first pass, in edge order] + [FIFO]. A flip's neighbour still ahead in the
-    # first pass is queued there already (and must now be evaluated); any other one joins the FIFO
-    # unless it is in it.
-    heapq.heapify(first_pass)
-    ahead = set(first_pass)
-    in_fifo = bytearray(len(length))
-    fifo = deque()
+    weight = half[e_he] + half[sib[e_he]]
+    refused = np.zeros(len(length), dtype=bool)
+    owner = np.empty(len(f_he), dtype=np.int64)
     n_flips = 0
-    while first_pass or fifo:
-        in_first = bool(first_pass)
-        if in_first:
-            e = heapq.heappop(first_pass)
-        else:
-            e = fifo.popleft()
-            in_fifo[e] = 0
+    while True:
+        e = np.flatnonzero((weight < -eps) & ~refused)
+        if not len(e):
+            return n_flips
         ha1 = e_he[e]
         hb1 = sib[ha1]
-        if not hc[ha1] + hc[hb1] < -eps:
-            continue
-        neighbours = flip(e, ha1, hb1)
-        n_flips += bool(neighbours)
-        for n in neighbours:
-            if in_first and n > e:
-                if n not in ahead:
-                    ahead.add(n)
-                    heapq.heappush(first_pass, n)
-            elif not in_fifo[n]:
-                in_fifo[n] = 1
-                fifo.append(n)
-    return n_flips
+        fa, fb = face[ha1], face[hb1]
+        owner[fa] = owner[fb] = len(length)
+        np.minimum.at(owner, fa, e)
+        np.minimum.at(owner, fb, e)
+        pick = (owner[fa] == e) & (owner[fb] == e)
+        e, ha1, hb1, fa, fb = e[pick], ha1[pick], hb1[pick], fa[pick], fb[pick]
+        ha2, hb2 = nxt[ha1], nxt[hb1]
+        ha3, hb3 = nxt[ha2], nxt[hb2]
+        # flippedEdgeLen: vertex 3 = (0, 0), 0 = (l30, 0); 2 from l02, l23; 1 from l01, l12; new = |1 - 3|
+        l30, l02, l23 = length[edge[hb3]], length[e], length[edge[hb2]]
+        s = (l30 + l02 + l23) / 2.0
+        area = np.sqrt(np.maximum(0.0, s * (s - l30) * (s - l02) * (s - l23)))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            x2 = (l30 * l30 - l02 * l02 + l23 * l23) / (2.0 * l30)
+            y2 = 2.0 * area / l30
+            x1, y1 = _layout(x2, y2, l30, np.zeros_like(l30), length[edge[ha2]], length[edge[ha3]])
+        new = np.sqrt(x1 * x1 + y1 * y1)
+        ok = np.isfinite(new) & (ha2 != hb1) & (hb2 != ha1)
+        refused[e[~ok]] = True
+        e, ha1, hb1, fa, fb, ha2, hb2, ha3, hb3, new = (a[ok] for a in (e, ha1, hb1, fa, fb, ha2, hb2, ha3, hb3,
+                                                                        new))
+        n_flips += len(e)
+        relink(nxt, vert, face, f_he, fa, fb, (ha1, ha2, ha3), (hb1, hb2, hb3))
+        length[e] = new
+        for h0 in (ha1, hb1):                                 # the two new faces, from their first halfedge
+            h1 = nxt[h0]
+            h2 = nxt[h1]
+            a, b, c = length[edge[h0]], length[edge[h1]], length[edge[h2]]
+            s = (a + b + c) / 2.0
+            area4 = 4.0 * np.sqrt(np.maximum(0.0, s * (s - a) * (s - b) * (s - c)))
+            with np.errstate(divide="ignore", invalid="ignore"):
+                half[h0] = (-a * a + b * b + c * c) / area4 / 2
+                half[h1] = (-b * b + c * c + a * a) / area4 / 2
+                half[h2] = (-c * c + a * a + b * b) / area4 / 2
+        touched = edge[np.concatenate([ha1, ha2, ha3, hb1, hb2, hb3])]
+        weight[touched] = half[e_he[touched]] + half[sib[e_he[touched]]]
+        refused[touched] = False
 
 
 def relink(nxt, vert, face, f_he, fa, fb, a, b) -> None:
@@ -265,57 +260,76 @@ def relink(nxt, vert, face, f_he, fa, fb, a, b) -> None:
     face[ha3], face[hb3] = fb, fa
 
 
-def _layout_from_origin(l_ab: float, l_bc: float, l_ca: float) -> tuple[float, float]:
-    """:func:`_layout` for A = (0, 0), B = (l_ab, 0) (the same floating-point result)."""
-    s = (l_ab + l_bc + l_ca) / 2.0
-    area = math.sqrt(max(0.0, s * (s - l_ab) * (s - l_bc) * (s - l_ca)))
-    return (l_ab * l_ab - l_bc * l_bc + l_ca * l_ca) / (2.0 * l_ab), 2.0 * area / l_ab
-
-
-def _layout(pa, pb, l_bc: float, l_ca: float) -> tuple[float, float]:
+def _layout(pax, pay, pbx, pby, l_bc, l_ca):
     """geometry-central's layoutTriangleVertex: C left of A -> B with |BC| = l_bc, |CA| = l_ca."""
-    dx, dy = pb[0] - pa[0], pb[1] - pa[1]
-    l_ab = math.sqrt(dx * dx + dy * dy)
+    dx, dy = pbx - pax, pby - pay
+    l_ab = np.sqrt(dx * dx + dy * dy)
     s = (l_ab + l_bc + l_ca) / 2.0
-    area = math.sqrt(max(0.0, s * (s - l_ab) * (s - l_bc) * (s - l_ca)))
+    area = np.sqrt(np.maximum(0.0, s * (s - l_ab) * (s - l_bc) * (s - l_ca)))
     h = 2.0 * area / l_ab
     w = (l_ab * l_ab - l_bc * l_bc + l_ca * l_ca) / (2.0 * l_ab)
     ux, uy = dx / l_ab, dy / l_ab
-    return pa[0] + w * ux + h * -uy, pa[1] + w * uy + h * ux
+    return pax + w * ux + h * -uy, pay + w * uy + h * ux
 
 
-def _halfedge_vectors(cover: _Cover, area: np.ndarray) -> np.ndarray:
-    """(H, 2): each halfedge as a vector in its face's layout (first halfedge along +x, third vertex
-    above), as geometry-central's halfedgeVectorsInFace."""
+def operators(cover: _Cover, n: int):
+    """Over the cover's distinct faces (:func:`_distinct_faces`), each counted with its multiplicity:
+    the cotangent Laplacian (CSC), lumped masses, gradient (2F' x N: per face the unnormalized gradient
+    direction, x components then y) and divergence (N x 2F'), with geometry-central's per-face formulas
+    (Heron from the face's first halfedge, half-cotangents, halfedge vectors in the face's layout)."""
     h0 = cover.f_he
-    h1 = cover.nxt[h0]
-    h2 = cover.nxt[h1]
-    l_ab, l_bc, l_ca = (cover.length[cover.edge[h]] for h in (h0, h1, h2))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        height = 2.0 * area / l_ab
-    w2 = l_ca * l_ca - height * height
-    w = np.sqrt(np.where(w2 > 0, w2, 0.0))
-    w = np.where(l_bc * l_bc > l_ab * l_ab + l_ca * l_ca, -w, w)
-    vec = np.empty((len(cover.nxt), 2))
-    vec[h0, 0], vec[h0, 1] = l_ab, 0.0
-    vec[h1, 0], vec[h1, 1] = w - l_ab, height
-    vec[h2, 0], vec[h2, 1] = -w, -height
-    return vec
-
-
-def _operators(cover: _Cover, n: int):
-    """Cotangent Laplacian (CSC) and lumped masses of the cover; gradient (2F' x N: per face the
-    unnormalized gradient direction, x components then y) and divergence (N x 2F') over its F' distinct
-    faces (:func:`_distinct_faces`)."""
-    area, half = _cotan_halves(cover)
-    e, s = cover.e_he, cover.sib[cover.e_he]
-    lap = laplacian(cover.vert[e], cover.vert[cover.nxt[e]], half[e] + half[s], n)
-    mass = np.bincount(cover.vert, weights=(area / 3.0)[cover.face], minlength=n)
-    h = np.stack([cover.f_he, cover.nxt[cover.f_he], cover.nxt[cover.nxt[cover.f_he]]], 1)   # (2F, 3)
-    keep, weight = _distinct_faces(cover, h)
+    h = np.stack([h0, cover.nxt[h0], cover.nxt[cover.nxt[h0]]], 1)   # (2F, 3)
+    keep, weight = _distinct_faces(cover, h, n)
     h = h[keep]
-    return (lap, mass, *gradient_divergence(cover.vert[h], _halfedge_vectors(cover, area)[h],
-                                            weight[:, None] * half[h], n))
+    corner = cover.vert[h]
+    la, lb, lc = (cover.length[cover.edge[h[:, c]]] for c in range(3))
+    s = (la + lb + lc) / 2.0
+    arg = s * (s - la) * (s - lb) * (s - lc)
+    area = np.sqrt(np.where(arg > 0, arg, 0.0))
+    sa, sb, sc = la * la, lb * lb, lc * lc
+    with np.errstate(divide="ignore", invalid="ignore"):
+        half = np.stack([(-sa + sb + sc) / (4.0 * area) / 2, (-sb + sc + sa) / (4.0 * area) / 2,
+                         (-sc + sa + sb) / (4.0 * area) / 2], 1)
+        height = 2.0 * area / la
+    wide = lc * lc - height * height                          # halfedgeVectorsInFace
+    wide = np.sqrt(np.where(wide > 0, wide, 0.0))
+    wide = np.where(lb * lb > la * la + lc * lc, -wide, wide)
+    vec = np.empty((len(h), 3, 2))
+    vec[:, 0, 0], vec[:, 0, 1] = la, 0.0
+    vec[:, 1, 0], vec[:, 1, 1] = wide - la, height
+    vec[:, 2, 0], vec[:, 2, 1] = -wide, -height
+    whalf = weight[:, None] * half
+    lap = laplacian(corner.ravel(), corner[:, [1, 2, 0]].ravel(), whalf.ravel(), n)
+    mass = np.bincount(corner.ravel(), np.repeat(weight * (area / 3.0), 3), minlength=n)
+    return (lap, mass, *gradient_divergence(corner, vec, whalf, n))
+
+
+def _distinct_faces(cover: _Cover, h: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Faces to keep (ascending) and their multiplicities: faces on the same three corners with bitwise
+    equal lengths opposite each corner add the same normalized gradient and divergence (up to
+    rounding). Grouped by a hash of corners and lengths; only exact equals are merged."""
+    v = [cover.vert[h[:, c]] for c in range(3)]
+    o = [cover.length[cover.edge[cover.nxt[h[:, c]]]].view(np.uint64) for c in range(3)]
+    for i, j in ((0, 1), (1, 2), (0, 1)):                    # sort the corners, lengths alongside
+        swap = v[j] < v[i]
+        v[i], v[j] = np.where(swap, v[j], v[i]), np.where(swap, v[i], v[j])
+        o[i], o[j] = np.where(swap, o[j], o[i]), np.where(swap, o[i], o[j])
+    columns = [(v[0] * n + v[1]) * n + v[2] if n < 2 ** 21 else v[0], *o] + ([] if n < 2 ** 21 else v[1:])
+    with np.errstate(over="ignore"):
+        code = columns[0].astype(np.uint64)
+        for col in columns[1:]:
+            code = (code ^ (code >> np.uint64(31))) * np.uint64(0x9E3779B97F4A7C15) + col.astype(np.uint64)
+    order = np.argsort(code)
+    a, b = order[:-1], order[1:]
+    same = code[a] == code[b]
+    for col in columns:
+        same &= col[a] == col[b]
+    new = np.concatenate([[True], ~same])                     # first of each run of equal faces
+    first = order[new]
+    weight = np.zeros(len(h))
+    weight[first] = np.diff(np.append(np.flatnonzero(new), len(order)))
+    keep = weight > 0
+    return keep, weight[keep]
 
 
 def laplacian(tail: np.ndarray, tip: np.ndarray, w: np.ndarray, n: int) -> sp.csc_matrix:
@@ -342,27 +356,6 @@ def gradient_divergence(corner: np.ndarray, vec: np.ndarray, whalf: np.ndarray, 
     c = wv - np.roll(wv, 1, axis=1)
     div_t = sp.csr_matrix((np.concatenate([c[..., 0].ravel(), c[..., 1].ravel()]), cols, rows), shape=shape)
     return grad, div_t.T.tocsr()
-
-
-def _distinct_faces(cover: _Cover, h: np.ndarray, rtol: float = 1e-12) -> tuple[np.ndarray, np.ndarray]:
-    """Faces to keep and their multiplicity. Two faces on the same three vertices with the same lengths
-    opposite them (to rtol) add the same normalized gradient and divergence: one of them counts twice.
-    The front and back copy of most faces are such twins (not where a boundary edge flipped)."""
-    by_vertex = np.argsort(cover.vert[h], axis=1)
-    corners = np.take_along_axis(cover.vert[h], by_vertex, 1)
-    opposite = np.take_along_axis(cover.length[cover.edge[cover.nxt[h]]], by_vertex, 1)
-    n = int(corners[:, 2].max()) + 1
-    key = (corners[:, 0] * n + corners[:, 1]) * n + corners[:, 2] if n < 2 ** 21 else np.arange(len(h))
-    order = np.argsort(key, kind="stable")
-    a, b = order[:-1], order[1:]
-    twin = ((key[a] == key[b]) & (np.abs(opposite[a] - opposite[b]) <= rtol * opposite[a]).all(1)
-            & (corners[a, 0] != corners[a, 1]) & (corners[a, 1] != corners[a, 2]))
-    twin[1:] &= ~twin[:-1]                                    # pairs only: a face is merged at most once
-    weight = np.ones(len(h))
-    weight[a[twin]] = 2.0
-    keep = np.ones(len(h), dtype=bool)
-    keep[b[twin]] = False
-    return keep, weight[keep]
 
 
 class HeatSolver:
@@ -432,11 +425,10 @@ class HeatDistance(HeatSolver):
         if problem:
             raise ValueError(f"heat method: {problem}")
         self.n = len(v)
-        cover = _tufted_cover(v, f)
-        _mollify(cover)
-        try:
-            self.n_flips = _flip_to_delaunay(cover)
-        except ZeroDivisionError:
-            raise ValueError("heat method: zero edge length or area after mollification") from None
+        if np.bincount(_edge_keys(f, len(v))[1]).max() > 2:
+            raise ValueError("heat method: non-manifold edges")
+        cover = tufted_cover(v, f)
+        mollify(cover, cover.length.sum() / len(cover.length))
+        self.n_flips = flip_to_delaunay(cover)
         self.t = t_coef * (cover.length.sum() / len(cover.length)) ** 2
-        self._factor("heat method", *_operators(cover, self.n))
+        self._factor("heat method", *operators(cover, self.n))
