@@ -130,26 +130,13 @@ def query(files, pretrained, source, pairs_csv, points_file, output, exact, clou
         from ..queries.files import relative_errors
         exact_d = np.where(on, exact_d, np.nan)
         err = relative_errors(field, exact_d, qm.scale, src)
-        mre = float(np.nanmean(err))
-        click.echo(f"mean relative error vs exact: {100 * mre:.2f}% (median {100 * np.nanmedian(err):.2f}%, "
-                   f"max {100 * np.nanmax(err):.1f}%)" + (" on the source's part" if n_parts > 1 else ""))
-        title += f": MRE {100 * mre:.2f}%"
+        _report_errors(err, "", " on the source's part" if n_parts > 1 else "")
+        title += f": MRE {100 * np.nanmean(err):.2f}%"
     lines = []
     if path_to is not None:
         lines = _paths(emb, qm, src, int(net_pairs[0, 1]), path_to, exact_d, name)
-    top = float(np.nanmax(exact_d if exact_d is not None else field))
-    if suffix == ".npy":
-        np.save(output, qm.to_file(field))
-    elif suffix == ".ply":
-        import trimesh
-        trimesh.Trimesh(qm.mesh.vertices, qm.mesh.faces, vertex_colors=_field_colors(field, top),
-                        process=False).export(output)
-    elif suffix == ".png":
-        from ..pictures.render import Row, save_panels
-        save_panels(output, [Row(qm.mesh.vertices, qm.mesh.faces, src, _field_panels(field, exact_d, err, src, top),
-                                 lines)], suptitle=title, size=size, up=up)
-    if output:
-        click.echo(f"written {output}")
+    _save_field(output, suffix, field, exact_d, err, src, qm.mesh.vertices, qm.mesh.faces, qm.to_file(field),
+                title, size, up, lines=lines)
 
 
 def _query_points(model_spec, pretrained, mesh_path, points_file, output, suffix, exact, prepare, device,
@@ -185,8 +172,7 @@ def _query_points(model_spec, pretrained, mesh_path, points_file, output, suffix
     d = emb.surface_distance(located.face[:, None], located.bary[:, None], located.face[None], located.bary[None])
     if exact_d is not None:
         errors = np.concatenate([relative_errors(d[p], exact_d[p], qm.scale, p) for p in range(len(d))])
-        click.echo(f"mean relative error vs exact (points inserted as vertices): {100 * np.nanmean(errors):.2f}% "
-                   f"(median {100 * np.nanmedian(errors):.2f}%, max {100 * np.nanmax(errors):.1f}%)")
+        _report_errors(errors, " (points inserted as vertices)")
     if suffix == ".npy":
         np.save(output, d)
     else:
@@ -276,20 +262,42 @@ def _query_cloud(model_spec, pretrained, cloud_path, source, output, suffix, exa
         except MeshError as exc:
             raise click.ClickException(f"{mesh_path}: --exact: {exc.reason}") from None
         err = relative_errors(field, exact_d, qm.scale, source)
-        click.echo(f"mean relative error vs exact on {Path(mesh_path).name}: {100 * np.nanmean(err):.2f}% (median "
-                   f"{100 * np.nanmedian(err):.2f}%; the points lie within {offset.max():.3g} of the surface)")
+        _report_errors(err, f" on {Path(mesh_path).name}", f"; the points lie within {offset.max():.3g} of the surface")
+    lit = cloud.normals
+    if suffix == ".png" and lit is None:
+        from ..fields.pointcloud import unoriented_normals
+        lit = unoriented_normals(points)
+    _save_field(output, suffix, field, exact_d, err, source, points, None, field, f"{name}, point {source}", size, up,
+                normals=lit)
+
+
+def _report_errors(err, where: str, after: str = "") -> None:
+    """The line reporting relative errors against exact distances (NaN left out)."""
+    import numpy as np
+
+    click.echo(f"mean relative error vs exact{where}: {100 * np.nanmean(err):.2f}% (median "
+               f"{100 * np.nanmedian(err):.2f}%, max {100 * np.nanmax(err):.1f}%){after}")
+
+
+def _save_field(output, suffix, field, exact_d, err, source: int, vertices, faces, saved, title: str, size, up,
+                **row) -> None:
+    """Write a query's field: ``saved`` (the field in the file's numbering) as .npy; a .ply of the vertices
+    coloured by it (a mesh, or points where ``faces`` is None); or a .png of its panels (``row``: a Row's
+    lines or normals), all on one scale: the exact field's where there is one."""
+    import numpy as np
+
     top = float(np.nanmax(exact_d if exact_d is not None else field))
     if suffix == ".npy":
-        np.save(output, field)
+        np.save(output, saved)
     elif suffix == ".ply":
         import trimesh
-        trimesh.PointCloud(points, colors=_field_colors(field, top)).export(output)
+        colors = _field_colors(field, top)
+        (trimesh.PointCloud(vertices, colors=colors) if faces is None else
+         trimesh.Trimesh(vertices, faces, vertex_colors=colors, process=False)).export(output)
     elif suffix == ".png":
-        from ..fields.pointcloud import unoriented_normals
         from ..pictures.render import Row, save_panels
-        lit = cloud.normals if cloud.normals is not None else unoriented_normals(points)
-        save_panels(output, [Row(points, None, source, _field_panels(field, exact_d, err, source, top), normals=lit)],
-                    size=size, up=up, suptitle=f"{name}, point {source}")
+        save_panels(output, [Row(vertices, faces, source, _field_panels(field, exact_d, err, source, top), **row)],
+                    suptitle=title, size=size, up=up)
     if output:
         click.echo(f"written {output}")
 

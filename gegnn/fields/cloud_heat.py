@@ -117,8 +117,7 @@ def _rowwise_lexsort(primary: np.ndarray, secondary: np.ndarray) -> np.ndarray:
 def local_triangulations(points, neighbors: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Each point's normal (N, 3) and its local Delaunay triangles, the soup (F, 3) of
     :class:`CloudHeatDistance` (its ``neighbors``: potpourri3d's 30 nearest where None); compiled
-    (``src/local_triangulation.cpp``: the module's normals and local triangulations, the library's arithmetic
-    in its order), in blocks of rows on torch's threads (:func:`gegnn.threads.by_rows`). ValueError for
+    (``src/local_triangulation.cpp``), in blocks of rows on torch's threads (:func:`gegnn.threads.by_rows`). ValueError for
     points the method cannot take."""
     from .._local_triangulation import local_triangulations as triangulate
 

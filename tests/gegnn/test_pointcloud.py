@@ -213,6 +213,13 @@ def test_query_a_cloud_with_an_outlier_against_the_exact_field(cloud_model, tmp_
     result = CliRunner().invoke(main, ["query", str(tmp_path / "cloud.safetensors"), str(tmp_path / "cloud.xyz"),
                                        "--source", "3", "-o", str(tmp_path / "field.png")])
     assert result.exit_code == 0 and (tmp_path / "field.png").stat().st_size > 10_000, result.output
+    result = CliRunner().invoke(main, ["query", str(tmp_path / "cloud.safetensors"), str(tmp_path / "cloud.xyz"),
+                                       "--source", "3", "-o", str(tmp_path / "field.ply")])
+    colored = trimesh.load(tmp_path / "field.ply")
+    assert result.exit_code == 0 and isinstance(colored, trimesh.PointCloud), result.output
+    colors = np.asarray(colored.colors)
+    np.testing.assert_allclose(colored.vertices, np.concatenate([p, [[40.0, 0, 0]]]), atol=1e-6)
+    assert (colors[1500, :3] == colors[1500, 0]).all() and len(np.unique(colors[:1500], axis=0)) > 50  # outlier grey
 
     exact, offset = exact_at_points(sphere_mesh(sphere), p, 3)
     great_circle = np.arccos(np.clip(p @ p[3], -1, 1))
