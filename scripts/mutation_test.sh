@@ -45,6 +45,9 @@ pytest_add_cli_args = ["-p", "no:cacheprovider"]
 EOF
 
 cd "$work"
+# joblib sequential: mutmut 3.8 reaps its children with os.wait and stops with a KeyError when the pid is a
+# loky worker that the tests left in its process (tests of parallel preparation).
+export JOBLIB_MULTIPROCESSING=0
 .venv/bin/python -m mutmut run > mutmut-run.log 2>&1 || { tail -30 mutmut-run.log; exit 1; }
 .venv/bin/python -m mutmut results --all true > mutmut-results.txt
 .venv/bin/python - "${modules[@]}" <<'EOF'
