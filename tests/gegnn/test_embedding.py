@@ -96,6 +96,35 @@ def test_matrix_blocks_rows_cols_and_out(landmark_embedding, tmp_path):
         tiny.matrix(rows, cols, dtype=np.float16)
 
 
+def test_matrix_of_many_rows_and_few_columns_has_every_row(landmark_embedding):
+    """Rows and columns are tiled apart: more rows than a tile against fewer columns than one."""
+    emb = landmark_embedding
+    rows, cols = np.arange(emb.num_vertices)[::-1], np.array([4, 9])
+    np.testing.assert_allclose(emb.matrix(rows, cols, tile=16), emb.distance(rows[:, None], cols[None, :]),
+                               rtol=1e-6, atol=1e-7)
+
+
+def test_surface_points_are_checked_and_none_is_an_empty_answer(landmark_embedding):
+    """What is not a point on the surface is refused with the reason; no points give an empty array of the
+    broadcast shape; an Embedding made without its mesh says so."""
+    emb = landmark_embedding
+    face, bary = np.array([0, 5]), np.array([[0.2, 0.3, 0.5], [1.0, 0.0, 0.0]])
+    for bad_face, bad_bary, error, match in [
+            (face[:1], bary, ValueError, "need integer faces"),          # two weights, one face
+            (face.astype(float), bary, ValueError, "need integer faces"),
+            (face, bary[:, :2], ValueError, "need integer faces"),
+            (np.array([0, len(emb.faces)]), bary, IndexError, "out of range"),
+            (face, np.array([[0.2, 0.3, 0.5], [1.1, -0.1, 0.0]]), ValueError, r"\[1.1, -0.1, 0.0\] are not >= 0"),
+            (face, np.array([[0.2, 0.3, 0.5], [0.5, 0.4, 0.0]]), ValueError, r"\[0.5, 0.4, 0.0\] are not >= 0")]:
+        with pytest.raises(error, match=match):
+            emb.surface_distance(bad_face, bad_bary, face, bary)
+    empty = emb.surface_distance(np.zeros(0, int)[:, None], np.zeros((0, 1, 3)), face[None], bary[None])
+    assert empty.shape == (0, 2)
+    bare = Embedding(emb.features, emb.decoder, scale=emb.scale, precision="fp32")
+    with pytest.raises(ValueError, match="this Embedding has no mesh"):
+        bare.surface_distance(face, bary, face, bary)
+
+
 def grid(n=40):
     x, y = np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n), indexing="ij")
     v = np.stack([x.ravel(), y.ravel(), np.zeros(n * n)], 1)
