@@ -47,7 +47,9 @@ EOF
 cd "$work"
 # joblib sequential: mutmut 3.8 reaps its children with os.wait and stops with a KeyError when the pid is a
 # loky worker that the tests left in its process (tests of parallel preparation).
-export JOBLIB_MULTIPROCESSING=0
+# One OpenMP thread: mutmut forks its workers from a process whose tests started torch's thread pool, and
+# a forked child waits forever on that pool (each such mutant then ends as a timeout).
+export JOBLIB_MULTIPROCESSING=0 OMP_NUM_THREADS=1
 .venv/bin/python -m mutmut run > mutmut-run.log 2>&1 || { tail -30 mutmut-run.log; exit 1; }
 .venv/bin/python -m mutmut results --all true > mutmut-results.txt
 .venv/bin/python - "${modules[@]}" <<'EOF'
