@@ -104,6 +104,18 @@ def test_matrix_of_many_rows_and_few_columns_has_every_row(landmark_embedding):
                                rtol=1e-6, atol=1e-7)
 
 
+@pytest.mark.parametrize("i,j,named", [(-1, 0, -1), (0, "n", "n"), (3, [2, "n"], "n")])
+def test_vertex_indices_are_checked_at_both_ends(landmark_embedding, i, j, named):
+    """An index below 0 or at the vertex count, on either side, is refused and named."""
+    emb = landmark_embedding
+    n = emb.num_vertices
+    j = [n if x == "n" else x for x in j] if isinstance(j, list) else (n if j == "n" else j)
+    named = n if named == "n" else named
+    with pytest.raises(IndexError, match=rf"vertex index out of range: {named} \(the mesh has {n} vertices\)"):
+        emb.distance(i, j)
+    assert emb.distance(0, n - 1).shape == ()
+
+
 def test_surface_points_are_checked_and_none_is_an_empty_answer(landmark_embedding):
     """What is not a point on the surface is refused with the reason; no points give an empty array of the
     broadcast shape; an Embedding made without its mesh says so."""
