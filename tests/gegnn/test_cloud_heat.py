@@ -139,9 +139,44 @@ def test_many_sources_per_solve_equal_one_at_a_time():
 
 
 def test_refuses_bad_clouds():
-    with pytest.raises(ValueError):
-        CloudHeatDistance(random_sphere(30))          # not more than k = 30 points
+    for points in (random_sphere(30), random_sphere(200)[:, :2], random_sphere(200)[None]):
+        with pytest.raises(ValueError, match=r"need \(N, 3\) points with N > 30"):  # k = 30 neighbours
+            CloudHeatDistance(points)
+    assert CloudHeatDistance(random_sphere(31)).n == 31
     p = random_sphere(200)
     p[3, 0] = np.nan
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="non-finite coordinates"):
         CloudHeatDistance(p)
+
+
+def brute_force_nearest(p: np.ndarray, k: int = 30) -> np.ndarray:
+    """Each point's k nearest others by ((dx^2 + dy^2) + dz^2), exact ties by index: every pair computed."""
+    d = p[:, None] - p[None]
+    d2 = (d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1]) + d[..., 2] * d[..., 2]
+    np.fill_diagonal(d2, np.inf)
+    return np.stack([np.lexsort((np.arange(len(p)), row))[:k] for row in d2])
+
+
+@pytest.mark.parametrize("name", ["random_sphere", "grid_plane", "box", "duplicates"])
+def test_nearest_neighbours_are_every_pairs_nearest(name):
+    """The k-d tree's neighbours, near ties re-sorted, are those of all pairs (exact ties on the grid and
+    the cube at the k-th place too; duplicates at distance 0, the point itself left out)."""
+    from gegnn.fields.cloud_heat import _nearest
+
+    q = random_sphere(800, seed=3)
+    p = {"box": lambda: box_mesh()[0], "duplicates": lambda: np.concatenate([q, q[:40], q[:5] + 1e-12])}.get(
+        name, CLOUDS.get(name))()
+    np.testing.assert_array_equal(_nearest(p), brute_force_nearest(p))
+
+
+def test_given_neighbours_and_triangles_are_the_ones_used():
+    """A point-cloud model's fields use its own neighbours (fewer than the library's 30): the fields
+    differ from the default ones, and equal those built from the same neighbours' triangles."""
+    from gegnn.fields.pointcloud import knn_edges
+
+    p = CLOUDS["bumpy"]()
+    neighbors = knn_edges(p, 12)[1]
+    own = CloudHeatDistance(p, neighbors=neighbors)
+    again = CloudHeatDistance(p, triangles=local_triangulations(p, neighbors))
+    np.testing.assert_array_equal(own.distance(9), again.distance(9))
+    assert np.abs(own.distance(9) - CloudHeatDistance(p).distance(9)).max() > 1e-3

@@ -326,6 +326,28 @@ def test_heat_fields_equal_potpourri3d_robust_fields(make):
     assert np.abs(ours - theirs).max() <= 1e-9 * np.abs(theirs).max()
 
 
+def test_heat_method_refuses_what_it_does_not_cover_and_says_why():
+    """cover_problem names why a mesh is not for HeatDistance (landmark_fields then takes another solver),
+    and HeatDistance refuses it with the same reason; a good mesh has none."""
+    v, f = open_bent_grid()
+    assert cover_problem(v, f) is None
+    extra = np.concatenate([v, [[9.0, 9.0, 9.0]]])
+    edges, count = np.unique(np.sort(f[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1), axis=0, return_counts=True)
+    a, b = edges[count == 2][0]  # an interior edge: a third face makes it non-manifold
+    bad = {"not a triangle mesh": [(v, f[:, :2]), (v[:, :2], f), (v, f[:0]), (v[None], f), (v, f[None])],
+           "non-finite vertex coordinates": [(np.where(np.arange(len(v))[:, None] == 5, np.nan, v), f)],
+           "face indices out of range or unreferenced vertices": [(v, np.where(f == 7, -1, f)),
+                                                                 (v, np.where(f == 7, len(v), f)), (extra, f)],
+           "face with a repeated vertex": [(v, np.concatenate([f, [[a, b, c]]]))
+                                           for a, b, c in ((1, 1, 2), (1, 2, 2), (2, 1, 2))],
+           "non-manifold edges": [(extra, np.concatenate([f, [[a, b, len(v)]]]))]}
+    for reason, meshes in bad.items():
+        for vertices, faces in meshes:
+            assert cover_problem(vertices, faces) == reason
+            with pytest.raises(ValueError, match=f"^heat method: {reason}$"):
+                HeatDistance(vertices, faces)
+
+
 def test_cocircular_heat_fields_are_as_near_exact_distances_as_potpourri3ds():
     """Where four vertices are cocircular either diagonal is Delaunay: the rounds of flips keep other
     diagonals than the library's queue in some tied quads of the cover's two sheets, and the fields
