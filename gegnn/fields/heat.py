@@ -67,15 +67,8 @@ POISSON_SHIFT = 1e-6    # (L + POISSON_SHIFT I) phi = div X, with L the cover's 
 
 
 def cover_problem(vertices, faces) -> str | None:
-    """Why :class:`HeatDistance` does not reproduce potpourri3d on this mesh; None when it does."""
-    f = np.asarray(faces)
-    problem = _input_problem(np.asarray(vertices), f)
-    if problem is None and np.bincount(_edge_keys(f, len(vertices))[1]).max() > 2:
-        problem = "non-manifold edges"
-    return problem
-
-
-def _input_problem(v: np.ndarray, f: np.ndarray) -> str | None:
+    """Why :class:`HeatDistance` does not take this mesh (nor reproduce potpourri3d on it); None when it does."""
+    v, f = np.asarray(vertices), np.asarray(faces)
     if v.ndim != 2 or v.shape[1] != 3 or f.ndim != 2 or f.shape[1] != 3 or not len(f):
         return "not a triangle mesh"
     if not np.isfinite(v).all():
@@ -84,6 +77,8 @@ def _input_problem(v: np.ndarray, f: np.ndarray) -> str | None:
         return "face indices out of range or unreferenced vertices"
     if ((f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 2] == f[:, 0])).any():
         return "face with a repeated vertex"
+    if np.bincount(_edge_keys(f, len(v))[1]).max() > 2:
+        return "non-manifold edges"
     return None
 
 
@@ -175,21 +170,26 @@ def mollify(cover: _Cover, mean: float, relative: float = MOLLIFY) -> None:
     cover.length += max(0.0, float(np.max(lc - la - lb + mean * relative)))
 
 
-def _cotan_halves(cover: _Cover) -> tuple[np.ndarray, np.ndarray]:
-    """Face areas (Heron, from each face's first halfedge) and, per halfedge, half the cotangent of the
-    angle opposite it: (l_jk^2 + l_ki^2 - l_ij^2) / (8 area)."""
-    h0 = cover.f_he
-    h1 = cover.nxt[h0]
-    a, b, c = (cover.length[cover.edge[h]] for h in (h0, h1, cover.nxt[h1]))
+def _heron_halves(a, b, c):
+    """Triangles of side lengths a, b, c (a along the first halfedge, then b, c): their area (Heron, as
+    geometry-central from the first halfedge) and half the cotangent of the angle opposite each side,
+    (b^2 + c^2 - a^2) / (8 area) for a and so on."""
     s = (a + b + c) / 2.0
     arg = s * (s - a) * (s - b) * (s - c)
     area = np.sqrt(np.where(arg > 0, arg, 0.0))
-    lij = cover.length[cover.edge]
-    ljk = lij[cover.nxt]
-    lki = ljk[cover.nxt]
     with np.errstate(divide="ignore", invalid="ignore"):
-        half = (-lij * lij + ljk * ljk + lki * lki) / (4.0 * area[cover.face]) / 2
-    return area, half
+        return area, ((-a * a + b * b + c * c) / (4.0 * area) / 2, (-b * b + c * c + a * a) / (4.0 * area) / 2,
+                      (-c * c + a * a + b * b) / (4.0 * area) / 2)
+
+
+def _cotan_halves(cover: _Cover) -> np.ndarray:
+    """Per halfedge, half the cotangent of the angle opposite it in its face (:func:`_heron_halves`)."""
+    h0 = cover.f_he
+    h1 = cover.nxt[h0]
+    h2 = cover.nxt[h1]
+    half = np.empty(len(cover.nxt))
+    half[h0], half[h1], half[h2] = _heron_halves(*(cover.length[cover.edge[h]] for h in (h0, h1, h2)))[1]
+    return half
 
 
 def flip_to_delaunay(cover: _Cover, eps: float = DELAUNAY_EPS) -> int:
@@ -199,7 +199,7 @@ def flip_to_delaunay(cover: _Cover, eps: float = DELAUNAY_EPS) -> int:
     is not finite or a vertex has degree 1); an edge refused waits until one of its faces changes."""
     nxt, vert, face, sib, edge, e_he, f_he, length = (cover.nxt, cover.vert, cover.face, cover.sib, cover.edge,
                                                       cover.e_he, cover.f_he, cover.length)
-    _, half = _cotan_halves(cover)
+    half = _cotan_halves(cover)
     weight = half[e_he] + half[sib[e_he]]
     refused = np.zeros(len(length), dtype=bool)
     owner = np.empty(len(f_he), dtype=np.int64)
@@ -237,13 +237,7 @@ def flip_to_delaunay(cover: _Cover, eps: float = DELAUNAY_EPS) -> int:
         for h0 in (ha1, hb1):                                 # the two new faces, from their first halfedge
             h1 = nxt[h0]
             h2 = nxt[h1]
-            a, b, c = length[edge[h0]], length[edge[h1]], length[edge[h2]]
-            s = (a + b + c) / 2.0
-            area4 = 4.0 * np.sqrt(np.maximum(0.0, s * (s - a) * (s - b) * (s - c)))
-            with np.errstate(divide="ignore", invalid="ignore"):
-                half[h0] = (-a * a + b * b + c * c) / area4 / 2
-                half[h1] = (-b * b + c * c + a * a) / area4 / 2
-                half[h2] = (-c * c + a * a + b * b) / area4 / 2
+            half[h0], half[h1], half[h2] = _heron_halves(length[edge[h0]], length[edge[h1]], length[edge[h2]])[1]
         touched = edge[np.concatenate([ha1, ha2, ha3, hb1, hb2, hb3])]
         weight[touched] = half[e_he[touched]] + half[sib[e_he[touched]]]
         refused[touched] = False
@@ -283,13 +277,9 @@ def operators(cover: _Cover, n: int):
     h = h[keep]
     corner = cover.vert[h]
     la, lb, lc = (cover.length[cover.edge[h[:, c]]] for c in range(3))
-    s = (la + lb + lc) / 2.0
-    arg = s * (s - la) * (s - lb) * (s - lc)
-    area = np.sqrt(np.where(arg > 0, arg, 0.0))
-    sa, sb, sc = la * la, lb * lb, lc * lc
+    area, halves = _heron_halves(la, lb, lc)
+    half = np.stack(halves, 1)
     with np.errstate(divide="ignore", invalid="ignore"):
-        half = np.stack([(-sa + sb + sc) / (4.0 * area) / 2, (-sb + sc + sa) / (4.0 * area) / 2,
-                         (-sc + sa + sb) / (4.0 * area) / 2], 1)
         height = 2.0 * area / la
     wide = lc * lc - height * height                          # halfedgeVectorsInFace
     wide = np.sqrt(np.where(wide > 0, wide, 0.0))
@@ -421,12 +411,10 @@ class HeatDistance(HeatSolver):
     def __init__(self, vertices, faces, t_coef: float = 0.5):
         v = np.ascontiguousarray(vertices, dtype=np.float64)
         f = np.ascontiguousarray(faces, dtype=np.int64)
-        problem = _input_problem(v, f)
+        problem = cover_problem(v, f)
         if problem:
             raise ValueError(f"heat method: {problem}")
         self.n = len(v)
-        if np.bincount(_edge_keys(f, len(v))[1]).max() > 2:
-            raise ValueError("heat method: non-manifold edges")
         cover = tufted_cover(v, f)
         mollify(cover, cover.length.sum() / len(cover.length))
         self.n_flips = flip_to_delaunay(cover)
