@@ -38,26 +38,28 @@ using Index = nb::ndarray<const int64_t, nb::ndim<2>, nb::c_contig, nb::device::
 constexpr double DEGENERATE = 1e-7;  // relative to the neighbourhood radius
 constexpr double PI = 3.141592653589793;
 
-// One point's working arrays, made once a call and reused point after point: the k offsets (k x 3), the
-// tangent coordinates (pushed out where degenerate), their angles and angular order, the sorted
-// coordinates and the ring of kept neighbours.
+using Offsets = Eigen::Matrix<double, 3, Eigen::Dynamic>;
+
+// One point's working arrays, made once a call and reused point after point: the k offsets (3 x k) and
+// the SVD's workspace, the tangent coordinates (pushed out where degenerate), their angles and angular
+// order, the sorted coordinates and the ring of kept neighbours.
 struct Scratch {
     explicit Scratch(int64_t k)
-        : offsets(static_cast<size_t>(3 * k)), px(static_cast<size_t>(k)), py(px), angle(px), x(px), y(px), len(px),
-          sq(px), order(static_cast<size_t>(k)), prv(order), nxt(order), valid(static_cast<size_t>(k)) {}
-    std::vector<double> offsets, px, py, angle, x, y, len, sq;
+        : offsets(3, k), svd(3, k, Eigen::ComputeThinU), px(static_cast<size_t>(k)), py(px), angle(px), x(px), y(px),
+          len(px), sq(px), order(static_cast<size_t>(k)), prv(order), nxt(order), valid(static_cast<size_t>(k)) {}
+    Offsets offsets;
+    Eigen::JacobiSVD<Offsets> svd;
+    std::vector<double> px, py, angle, x, y, len, sq;
     std::vector<int64_t> order, prv, nxt;
     std::vector<char> valid;
 };
 
 using V3 = std::array<double, 3>;
 
-// The unit normal of one point from its k offsets (k x 3, row-major): the last left singular vector of
-// the 3 x k matrix of offsets, by Eigen's JacobiSVD, sign as it leaves it.
-V3 svd_normal(int64_t k, const double* offsets) {
-    const Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>> m(offsets, k, 3);
-    const Eigen::JacobiSVD<Eigen::Matrix<double, 3, Eigen::Dynamic>> svd(m.transpose(), Eigen::ComputeThinU);
-    const Eigen::Vector3d n = svd.matrixU().col(2).normalized();
+// The unit normal of one point from its offsets (s.offsets): the last left singular vector of the 3 x k
+// matrix, by Eigen's JacobiSVD (in the scratch's workspace), sign as it leaves it.
+V3 svd_normal(Scratch& s) {
+    const Eigen::Vector3d n = s.svd.compute(s.offsets, Eigen::ComputeThinU).matrixU().col(2).normalized();
     return {n[0], n[1], n[2]};
 }
 
@@ -169,20 +171,20 @@ nb::tuple local_triangulations(const Points& points, const Rows& centers, const 
     {
         nb::gil_scoped_release released;
         Scratch s(k);
-        std::vector<double>& offsets = s.offsets;
+        Offsets& offsets = s.offsets;
         for (int64_t r = 0; r < rows; ++r) {
             const int64_t i = centers.data()[r];
             const int64_t* nb_row = neighbors.data() + r * k;
             for (int64_t j = 0; j < k; ++j)
-                for (int c = 0; c < 3; ++c) offsets[3 * j + c] = p[3 * nb_row[j] + c] - p[3 * i + c];
-            const V3 normal = svd_normal(k, offsets.data());
+                for (int c = 0; c < 3; ++c) offsets(c, j) = p[3 * nb_row[j] + c] - p[3 * i + c];
+            const V3 normal = svd_normal(s);
             for (int c = 0; c < 3; ++c) normals[3 * r + c] = normal[c];
             // the tangent frame of the normal (Vector3::buildTangentBasis) and the offsets in it
             const V3 u = unit(normal);
             const V3 test = std::abs(u[0]) > 0.9 ? V3{0.0, 1.0, 0.0} : V3{1.0, 0.0, 0.0};
             const V3 bx = unit(cross(test, u)), by = unit(cross(u, bx));
             for (int64_t j = 0; j < k; ++j) {
-                const V3 o = {offsets[3 * j], offsets[3 * j + 1], offsets[3 * j + 2]};
+                const V3 o = {offsets(0, j), offsets(1, j), offsets(2, j)};
                 const double along = dot(normal, o);
                 const V3 flat = {o[0] - normal[0] * along, o[1] - normal[1] * along, o[2] - normal[2] * along};
                 s.px[j] = dot(bx, flat);
