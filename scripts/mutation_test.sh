@@ -6,6 +6,7 @@
 #   pip install mutmut
 #   bash scripts/mutation_test.sh WORKDIR MODULE.py [MODULE.py ...] -- TEST_PATH [TEST_PATH ...]
 #   e.g. bash scripts/mutation_test.sh /tmp/mut geodata/stages/normalize.py -- tests/geodata/test_stages.py
+#   SAMPLE=60 bash scripts/mutation_test.sh ...   # a random sample of 60 mutants (seed 0) where each takes minutes
 #
 # WORKDIR gets a copy of the committed tree (git archive HEAD), the installed compiled modules beside their
 # packages, and a virtual environment that sees this one's packages but not its editable install (whose
@@ -50,8 +51,17 @@ cd "$work"
 # One OpenMP thread: mutmut forks its workers from a process whose tests started torch's thread pool, and
 # a forked child waits forever on that pool (each such mutant then ends as a timeout).
 export JOBLIB_MULTIPROCESSING=0 OMP_NUM_THREADS=1
-.venv/bin/python -m mutmut run > mutmut-run.log 2>&1 || { tail -30 mutmut-run.log; exit 1; }
-.venv/bin/python -m mutmut results --all true > mutmut-results.txt
+if [[ -n ${SAMPLE:-} ]]; then
+    # generate the mutants and map the tests (a pattern that names no mutant runs none), then run a sample
+    .venv/bin/python -m mutmut run 'none-of-them' > mutmut-run.log 2>&1 || { tail -30 mutmut-run.log; exit 1; }
+    mapfile -t names < <(.venv/bin/python -m mutmut results --all true |
+        sed -n 's/^ *\([^ :]*__mutmut_[0-9]*\):.*/\1/p' | shuf -n "$SAMPLE" --random-source=<(yes))
+    .venv/bin/python -m mutmut run "${names[@]}" >> mutmut-run.log 2>&1 || { tail -30 mutmut-run.log; exit 1; }
+    .venv/bin/python -m mutmut results --all true | grep -F -f <(printf '%s:\n' "${names[@]}") > mutmut-results.txt
+else
+    .venv/bin/python -m mutmut run > mutmut-run.log 2>&1 || { tail -30 mutmut-run.log; exit 1; }
+    .venv/bin/python -m mutmut results --all true > mutmut-results.txt
+fi
 .venv/bin/python - "${modules[@]}" <<'EOF'
 import re, sys
 from collections import Counter
