@@ -69,6 +69,37 @@ def test_run_files_and_resume_equals_uninterrupted(tiny_store, tmp_path, monkeyp
     assert "epoch 1 step 4 lr" in log and "train_mre" in log and "val_mre" in log
 
 
+def test_the_curves_are_drawn_at_once_and_with_the_last_epoch(tiny_store, tmp_path, monkeypatch):
+    """curves.png: drawn after the first epoch, then at most every 30 s, and always after the last one."""
+    drawn = []
+    monkeypatch.setattr(gtrain, "plot_curves", lambda run, rows: drawn.append(len(rows)))
+    train(config(tiny_store, tmp_path / "run", epochs=3), small_config())
+    assert drawn[0] == 1 and drawn[-1] == 3
+
+
+def test_a_run_warms_the_decoder_alone_first_and_not_again_when_resumed(tiny_store, tmp_path, monkeypatch):
+    """--decoder-warmup N: N decoder-only steps before the first epoch (the network untouched, the decoder
+    moved), its validation logged; a resumed run does not warm again."""
+    real, calls = gtrain.warm_decoder, []
+
+    def spy(model, loader, steps, *args):
+        before = {k: v.clone() for k, v in model.state_dict().items()}
+        real(model, loader, steps, *args)
+        after = model.state_dict()
+        calls.append(steps)
+        assert all(torch.equal(after[k], v) for k, v in before.items() if not k.startswith("distance."))
+        assert not all(torch.equal(after[k], v) for k, v in before.items() if k.startswith("distance."))
+
+    monkeypatch.setattr(gtrain, "warm_decoder", spy)
+    run = tmp_path / "run"
+    train(config(tiny_store, run, epochs=1, decoder_warmup=5), small_config(landmarks=4))
+    assert calls == [5]
+    log = (run / "train.log").read_text()
+    assert "decoder warm-up: 5 steps on" in log and "after the decoder warm-up: val_mre" in log
+    train(config(tiny_store, run, epochs=2, decoder_warmup=5, resume=True), small_config(landmarks=4))
+    assert calls == [5]
+
+
 def test_init_starts_from_weights(tiny_store, tmp_path):
     train(config(tiny_store, tmp_path / "a", epochs=1), small_config())
     rows = train(config(tiny_store, tmp_path / "b", epochs=1, init=str(tmp_path / "a" / "best.safetensors"),
