@@ -163,11 +163,10 @@ def prepare(raw_dir, out, pairs, target_vertices, collapse, seed, geodesic_backe
 
 def _run(fn, tasks, what, jobs, backend, scheduler) -> list[dict]:
     rows, warned = [], set()
-    bar = progress_bar(total=len(tasks), desc=what, unit="mesh", disable=None, dynamic_ncols=True)
     try:
-        for row in parallel_map(fn, tasks, jobs, backend, scheduler):
+        for row in progress_bar(parallel_map(fn, tasks, jobs, backend, scheduler), total=len(tasks), desc=what,
+                                unit="mesh", disable=None, dynamic_ncols=True):
             rows.append(row)
-            bar.update()
             for text in row.get("warnings", []):
                 if text not in warned:
                     warned.add(text)
@@ -180,8 +179,6 @@ def _run(fn, tasks, what, jobs, backend, scheduler) -> list[dict]:
                 log.warning("FAILED %s %s [%s] %s", row["mesh_id"], row["source"], row["stage"], row["error"])
     except RuntimeError as exc:
         raise click.ClickException(str(exc)) from None
-    finally:
-        bar.close()
     return rows
 
 
@@ -198,14 +195,12 @@ def _stage_seconds(timings: list[dict]) -> str:
 def _summary(rows: list[dict], n_done: int, n_failed: int) -> None:
     ok = [r for r in rows if r["status"] == "ok"]
     failed = [r for r in rows if r["status"] != "ok"]
-    lines = [f"summary: {len(ok)} ok, {len(failed)} failed this run; "
-             f"{n_done} committed and {n_failed} failed before"]
+    log.info("summary: %d ok, %d failed this run; %d committed and %d failed before", len(ok), len(failed), n_done,
+             n_failed)
     if ok:
-        lines.append(_stage_seconds([r["timings"] for r in ok]))
+        log.info(_stage_seconds([r["timings"] for r in ok]))
     for r in failed:
-        lines.append(f"  failed {r['source']} [{r['stage']}] {r['error']}")
-    for line in lines:
-        log.info(line)
+        log.info("  failed %s [%s] %s", r["source"], r["stage"], r["error"])
 
 
 @main.command()
@@ -216,7 +211,7 @@ def _summary(rows: list[dict], n_done: int, n_failed: int) -> None:
 @TIMEOUT_OPTION
 @click.option("--retry-failed", is_flag=True, help="Try again the meshes whose biharmonic step failed.")
 @_scale_options
-def biharmonic(out, pairs, seed, timeout, retry_failed, jobs, backend, scheduler, shard, log_file):
+def biharmonic(out, pairs, seed, timeout, retry_failed, **scale):
     """Add exact biharmonic distances to every committed mesh of store OUT.
 
     Distances follow Lipman, Rustamov and Funkhouser (2010) with libigl's cotangent Laplacian and
@@ -225,8 +220,7 @@ def biharmonic(out, pairs, seed, timeout, retry_failed, jobs, backend, scheduler
     """
     from geodata.biharmonic_runner import BiharmonicConfig, process_biharmonic
 
-    _add_subgroup(out, "biharmonic", process_biharmonic, BiharmonicConfig(pairs, seed, timeout), retry_failed, jobs,
-                  backend, scheduler, shard, log_file)
+    _add_subgroup(out, "biharmonic", process_biharmonic, BiharmonicConfig(pairs, seed, timeout), retry_failed, **scale)
 
 
 def _add_subgroup(out, subgroup, process, config, retry_failed, jobs, backend, scheduler, shard,
@@ -255,7 +249,7 @@ def _add_subgroup(out, subgroup, process, config, retry_failed, jobs, backend, s
 @TIMEOUT_OPTION
 @click.option("--retry-failed", is_flag=True, help="Try again the meshes whose points step failed.")
 @_scale_options
-def points(out, n_points, pairs, seed, timeout, retry_failed, jobs, backend, scheduler, shard, log_file):
+def points(out, n_points, pairs, seed, timeout, retry_failed, **scale):
     """Add surface points with exact geodesic distances between them to every committed mesh of store OUT
     (the data of point-cloud models).
 
@@ -266,8 +260,7 @@ def points(out, n_points, pairs, seed, timeout, retry_failed, jobs, backend, sch
     """
     from geodata.points_runner import PointsConfig, process_points
 
-    _add_subgroup(out, "points", process_points, PointsConfig(n_points, pairs, seed, timeout), retry_failed, jobs,
-                  backend, scheduler, shard, log_file)
+    _add_subgroup(out, "points", process_points, PointsConfig(n_points, pairs, seed, timeout), retry_failed, **scale)
 
 
 @main.command()
@@ -281,7 +274,7 @@ def points(out, n_points, pairs, seed, timeout, retry_failed, jobs, backend, sch
 def augment(raw_dir, out_dir, variants, seed, jobs, include, exclude):
     """Write randomized variants of every mesh under RAW_DIR to OUT_DIR, for `geodata prepare`.
 
-    
+    \b
     Each variant: anisotropic scaling along a random frame, and with probability 1/2 each a bend,
     a twist, and 1-3 cuts that open holes. Made before prepare, so the variants' distances are exact.
     Output: OUT_DIR/<relative path>.aug<k>.ply; a rerun rewrites the same files.
@@ -298,7 +291,7 @@ def augment(raw_dir, out_dir, variants, seed, jobs, include, exclude):
     rows = []
     calls = (delayed(augment_file)(str(base / s), s, out_dir, cfg) for s in sources)
     for row in progress_bar(Parallel(n_jobs=jobs, return_as="generator")(calls), total=len(sources), desc="augment",
-                    unit="file", disable=None, dynamic_ncols=True):
+                            unit="file", disable=None, dynamic_ncols=True):
         rows.append(row)
         if row["status"] != "ok":
             log.warning("FAILED %s %s", row["source"], row["error"])

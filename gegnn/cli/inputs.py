@@ -1,6 +1,7 @@
 """The model, meshes and point clouds a command on a user's files reads, and its output's kind."""
 from __future__ import annotations
 
+from contextlib import contextmanager
 from pathlib import Path
 
 import click
@@ -24,6 +25,19 @@ def _model_and_meshes(files, pretrained, many=False):
         if not Path(path).is_file():
             raise click.BadParameter(f"{path}: no such file", param_hint="[CHECKPOINT] MESH")
     return spec, list(meshes)
+
+
+@contextmanager
+def _click_errors(where: str = "", *errors):
+    """The block's failures on a user's file (MeshError, ValueError and ``errors``) as click's one-line error
+    "WHERE: message" (the message alone without WHERE; a MeshError by its reason)."""
+    from geodata.mesh import MeshError
+
+    try:
+        yield
+    except (MeshError, ValueError, *errors) as exc:
+        text = exc.reason if isinstance(exc, MeshError) else str(exc)
+        raise click.ClickException(f"{where}: {text}" if where else text) from None
 
 
 def _model_config(spec, pretrained):
@@ -86,14 +100,11 @@ def _load_cloud(cloud_path, sources, err: bool = False):
     source is one of them; its notes and the outliers' count echoed (to stderr with ``err``)."""
     import numpy as np
 
-    from geodata.mesh import MeshError
     from geodata.stages.cloud import load_cloud_file, outliers
 
     name = Path(cloud_path).name
-    try:
+    with _click_errors(cloud_path):
         cloud = load_cloud_file(cloud_path)
-    except MeshError as exc:
-        raise click.ClickException(f"{cloud_path}: {exc.reason}") from None
     n = len(cloud.points)
     for note in cloud.notes:
         click.echo(f"{name}: note: {note}", err=err)
@@ -113,8 +124,6 @@ def _load_cloud(cloud_path, sources, err: bool = False):
 def _embed_cloud(model, cloud, keep, cloud_path, precision):
     """The model's embedding of a cloud file's kept points (with the file's normals, if it has them); a cloud
     the model cannot take fails naming the file."""
-    try:
+    with _click_errors(cloud_path):
         return model.embed(cloud.points[keep], normals=None if cloud.normals is None else cloud.normals[keep],
                            precision=precision)
-    except ValueError as exc:
-        raise click.ClickException(f"{cloud_path}: {exc}") from None

@@ -5,7 +5,8 @@ from pathlib import Path
 
 import click
 
-from .inputs import _embed_cloud, _load_cloud, _load_mesh, _load_model, _model_and_meshes, _model_config
+from .inputs import (_click_errors, _embed_cloud, _load_cloud, _load_mesh, _load_model, _model_and_meshes,
+                     _model_config)
 from .options import DEVICE_OPTION, MODEL_ARG, PRECISION_OPTION, PRETRAINED_HELP
 
 
@@ -49,7 +50,7 @@ def pairwise(files, pretrained, output, rows_file, dtype, exact, heat, jobs, pre
 
     import numpy as np
 
-    from geodata.mesh import MeshError, vertex_components
+    from geodata.mesh import vertex_components
 
     from ..queries.pairwise import FileMatrix, MatrixFile, exact_rows, heat_rows
 
@@ -75,7 +76,7 @@ def pairwise(files, pretrained, output, rows_file, dtype, exact, heat, jobs, pre
     out = MatrixFile(output, (len(rows), len(everything)), dtype)
     matrix = FileMatrix(out, vertex_components(qm.mesh), qm.to_mesh, rows, everything)
     start = time.perf_counter()
-    try:
+    with _click_errors(name):
         if exact:
             what = f"exact {kind}"
             exact_rows(qm.mesh, matrix.mesh_rows, matrix.mesh_cols, matrix, kind, jobs or None, progress=True)
@@ -89,8 +90,6 @@ def pairwise(files, pretrained, output, rows_file, dtype, exact, heat, jobs, pre
             # float32 tiles: the file converts them to --dtype and checks the range, once for every source
             emb.matrix(matrix.mesh_rows, None if rows_file is None else matrix.mesh_cols, out=matrix,
                        progress=True)
-    except (MeshError, ValueError) as exc:
-        raise click.ClickException(f"{name}: {exc}") from None
     out.close()
     _matrix_written(name, out, what, dtype, time.perf_counter() - start, output)
 
@@ -101,10 +100,8 @@ def _matrix_rows(rows_file, n: int, name: str, item: str, items: str):
 
     from ..queries.files import read_indices
 
-    try:
+    with _click_errors():
         rows = np.arange(n) if rows_file is None else read_indices(rows_file)
-    except ValueError as exc:
-        raise click.ClickException(str(exc)) from None
     bad = (rows < 0) | (rows >= n)
     if bad.any():
         raise click.ClickException(f"{rows_file}: {item} {rows[bad][0]} out of range: {name} has {n} {items}")
@@ -140,9 +137,7 @@ def _pairwise_cloud(model_spec, pretrained, cloud_path, output, rows_file, dtype
     Path(output).parent.mkdir(parents=True, exist_ok=True)
     out = MatrixFile(output, (len(rows), n), dtype)
     matrix = FileMatrix(out, emb.part, to_kept, rows, np.arange(n))
-    try:
+    with _click_errors(name):
         emb.matrix(matrix.mesh_rows, None if rows_file is None else matrix.mesh_cols, out=matrix, progress=True)
-    except ValueError as exc:
-        raise click.ClickException(f"{name}: {exc}") from None
     out.close()
     _matrix_written(name, out, f"predicted {model.config.distance}", dtype, time.perf_counter() - start, output)

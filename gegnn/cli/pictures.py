@@ -7,7 +7,8 @@ from pathlib import Path
 import click
 
 from ..model import PRETRAINED
-from .inputs import _embed_cloud, _load_cloud, _load_mesh, _load_model, _model_and_meshes, _model_config, _output_suffix
+from .inputs import (_click_errors, _embed_cloud, _load_cloud, _load_mesh, _load_model, _model_and_meshes,
+                     _model_config, _output_suffix)
 from .options import DEVICE_OPTION, MODEL_ARG, PRECISION_OPTION, PREPARE_OPTION, PRETRAINED_HELP, SIZE_OPTION, UP_OPTION
 
 
@@ -50,33 +51,27 @@ def view(files, pretrained, output, sources, exact, cloud_mesh, dtype, prepare, 
     """
     import numpy as np
 
-    from geodata.mesh import MeshError
-
     from ..pictures.viewer import view_page
 
     spec, (mesh_path,) = _model_and_meshes(files, pretrained)
     _output_suffix(output, (".html", ".htm"))
-    if _model_config(spec, pretrained).points:
+    config = _model_config(spec, pretrained)
+    sources = sources or (0,)
+    if config.points:
         if prepare:
             raise click.UsageError("--prepare remeshes a mesh: a point cloud is shown as it is")
-        return _view_cloud(spec, pretrained, mesh_path, sources or (0,), exact, cloud_mesh, output, dtype, device,
-                           precision, up)
+        return _view_cloud(spec, pretrained, mesh_path, sources, exact, cloud_mesh, output, dtype, device, precision,
+                           up)
     if cloud_mesh:
         raise click.UsageError("--mesh goes with a point-cloud model (the file is the mesh here)")
     qm = _load_mesh(mesh_path, prepare)
-    sources = sources or (0,)
-    try:
+    with _click_errors(mesh_path):
         net_sources = [int(qm.vertices(s)) for s in sources]
-    except ValueError as exc:
-        raise click.ClickException(f"{mesh_path}: {exc}") from None
-    config = _model_config(spec, pretrained)
     fields = {}
     if exact:
         from ..fields.exact import exact_fields
-        try:
+        with _click_errors(f"{mesh_path}: --exact"):
             fields = dict(zip(net_sources, exact_fields(qm.mesh, np.array(net_sources), config.distance)))
-        except MeshError as exc:
-            raise click.ClickException(f"{mesh_path}: --exact: {exc.reason}") from None
     emb = _load_model(spec, pretrained, device).embed(qm.mesh.vertices, qm.mesh.faces, precision=precision)
     file_index = None
     if not prepare:  # the smallest file vertex of each mesh vertex
@@ -99,8 +94,6 @@ def _view_cloud(model_spec, pretrained, cloud_path, sources, exact, mesh_path, o
     """``gegnn view`` with a point-cloud model: the page of the cloud's points (outliers left out)."""
     import numpy as np
 
-    from geodata.mesh import MeshError
-
     from ..pictures.viewer import view_page
 
     name = Path(cloud_path).name
@@ -115,11 +108,9 @@ def _view_cloud(model_spec, pretrained, cloud_path, sources, exact, mesh_path, o
     if exact:
         from ..fields.exact import exact_at_points
         from ..queries.files import load_query_mesh
-        try:
+        with _click_errors(f"{mesh_path}: --exact"):
             qm = load_query_mesh(mesh_path)
             fields = {s: exact_at_points(qm.mesh, points, s, model.config.distance)[0] for s in local}
-        except MeshError as exc:
-            raise click.ClickException(f"{mesh_path}: --exact: {exc.reason}") from None
     emb = _embed_cloud(model, cloud, keep, cloud_path, precision)
     label = f"--pretrained {model_spec}" if pretrained else Path(model_spec).name
     page = view_page(emb, title=f"{name}: {model.config.distance} distance predicted by GeGnn",
@@ -162,10 +153,8 @@ def texture(files, pretrained, center, radius, squares, compare, output, prepare
     spec, (mesh_path,) = _model_and_meshes(files, pretrained)
     suffix = _output_suffix(output, (".png", ".npy"))
     qm = _load_mesh(mesh_path, prepare)
-    try:
+    with _click_errors(mesh_path):
         c = int(qm.vertices(center))
-    except ValueError as exc:
-        raise click.ClickException(f"{mesh_path}: {exc}") from None
     radius = radius or 0.4 * qm.scale
     emb = _load_model(spec, pretrained, device).embed(qm.mesh.vertices, qm.mesh.faces)
     lm = emb.log_map(c, radius)

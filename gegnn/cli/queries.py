@@ -5,7 +5,8 @@ from pathlib import Path
 
 import click
 
-from .inputs import _embed_cloud, _load_cloud, _load_mesh, _load_model, _model_and_meshes, _model_config, _output_suffix
+from .inputs import (_click_errors, _embed_cloud, _load_cloud, _load_mesh, _load_model, _model_and_meshes,
+                     _model_config, _output_suffix)
 from .options import DEVICE_OPTION, MODEL_ARG, PRECISION_OPTION, PREPARE_OPTION, PRETRAINED_HELP, SIZE_OPTION, UP_OPTION
 
 
@@ -59,51 +60,44 @@ def query(files, pretrained, source, pairs_csv, points_file, output, exact, clou
     """
     import numpy as np
 
-    from geodata.mesh import MeshError
-
     from ..queries.files import read_pairs
 
     model_spec, (mesh_path,) = _model_and_meshes(files, pretrained)
-    if _model_config(model_spec, pretrained).points:
+    config = _model_config(model_spec, pretrained)
+    if config.points:
         if (source is None) == (pairs_csv is None) or points_file or path_to is not None or prepare:
             raise click.UsageError("a point-cloud model answers --source I (with --exact --mesh MESH to compare) "
                                    "or --pairs FILE")
-        if exact and pairs_csv:
-            raise click.UsageError("--exact goes with --source (it compares whole fields)")
-        if pairs_csv:
-            _output_suffix(output, (".csv",))
-            return _query_cloud_pairs(model_spec, pretrained, mesh_path, pairs_csv, output, device, precision)
-        return _query_cloud(model_spec, pretrained, mesh_path, source, output,
-                            _output_suffix(output, (".npy", ".ply", ".png")), exact, cloud_mesh, device, precision,
-                            up, size)
-    if cloud_mesh:
+    elif cloud_mesh:
         raise click.UsageError("--mesh goes with a point-cloud model (the file is the mesh here)")
-    if sum(x is not None for x in (source, pairs_csv, points_file)) != 1:
+    elif sum(x is not None for x in (source, pairs_csv, points_file)) != 1:
         raise click.UsageError("give one of --source, --pairs or --points")
     if exact and pairs_csv:
-        raise click.UsageError("--exact goes with --source or --points (it compares whole fields)")
+        takes = "--source" if config.points else "--source or --points"
+        raise click.UsageError(f"--exact goes with {takes} (it compares whole fields)")
     if path_to is not None and source is None:
         raise click.UsageError("--path goes with --source (the path runs from the source)")
+    suffix = _output_suffix(output, (".csv",) if pairs_csv else (".npy", ".csv") if points_file else
+                            (".npy", ".ply", ".png"))
+    if config.points and pairs_csv:
+        return _query_cloud_pairs(model_spec, pretrained, mesh_path, pairs_csv, output, device, precision)
+    if config.points:
+        return _query_cloud(model_spec, pretrained, mesh_path, source, output, suffix, exact, cloud_mesh, device,
+                            precision, up, size)
     if points_file:
-        return _query_points(model_spec, pretrained, mesh_path, points_file, output,
-                             _output_suffix(output, (".npy", ".csv")), exact, prepare, device, precision)
-    suffix = _output_suffix(output, (".csv",) if pairs_csv else (".npy", ".ply", ".png"))
+        return _query_points(model_spec, pretrained, mesh_path, points_file, output, suffix, exact, prepare, device,
+                             precision)
     qm = _load_mesh(mesh_path, prepare)
-    try:
+    with _click_errors(mesh_path):
         pairs = read_pairs(pairs_csv) if pairs_csv else np.array([[source, source if path_to is None else path_to]])
         net_pairs = qm.vertices(pairs)
-    except (MeshError, ValueError) as exc:
-        raise click.ClickException(f"{mesh_path}: {exc}") from None
     src = int(net_pairs[0, 0])
-    config = _model_config(model_spec, pretrained)
     kind = config.distance
     exact_d = err = None
     if exact and source is not None:  # before the network: the exact solver runs in a forked child
         from ..fields.exact import exact_field
-        try:
+        with _click_errors(f"{mesh_path}: --exact"):
             exact_d = exact_field(qm.mesh, src, kind)
-        except MeshError as exc:
-            raise click.ClickException(f"{mesh_path}: --exact: {exc.reason}") from None
 
     emb = _load_model(model_spec, pretrained, device).embed(qm.mesh.vertices, qm.mesh.faces, precision=precision)
     if pairs_csv:
@@ -145,7 +139,6 @@ def _query_points(model_spec, pretrained, mesh_path, points_file, output, suffix
     between the same points inserted as vertices."""
     import numpy as np
 
-    from geodata.mesh import MeshError
     from geodata.surface_points import insert_points, locate_points
 
     from ..fields.exact import exact_fields
@@ -153,10 +146,8 @@ def _query_points(model_spec, pretrained, mesh_path, points_file, output, suffix
 
     qm = _load_mesh(mesh_path, prepare)
     name = Path(mesh_path).name
-    try:
+    with _click_errors("", OSError):
         points = read_points(points_file)
-    except (OSError, ValueError) as exc:
-        raise click.ClickException(str(exc)) from None
     located = locate_points(qm.mesh, points)
     click.echo(f"{name}: {len(points)} points, at most {located.offset.max():.3g} from the surface (each moved to "
                "the closest surface point)")
@@ -164,10 +155,8 @@ def _query_points(model_spec, pretrained, mesh_path, points_file, output, suffix
     exact_d = None
     if exact:  # before the network: the exact solver runs in a forked child
         refined, vertex = insert_points(qm.mesh, located.face, located.bary)
-        try:
+        with _click_errors(f"{name}: --exact"):
             exact_d = exact_fields(refined, vertex, kind)[:, vertex]
-        except MeshError as exc:
-            raise click.ClickException(f"{name}: --exact: {exc.reason}") from None
     emb = _load_model(model_spec, pretrained, device).embed(qm.mesh.vertices, qm.mesh.faces, precision=precision)
     d = emb.surface_distance(located.face[:, None], located.bary[:, None], located.face[None], located.bary[None])
     if exact_d is not None:
@@ -203,10 +192,8 @@ def _query_cloud_pairs(model_spec, pretrained, cloud_path, pairs_csv, output, de
     from ..queries.files import read_pairs
 
     name = Path(cloud_path).name
-    try:
+    with _click_errors():
         pairs = read_pairs(pairs_csv)
-    except ValueError as exc:
-        raise click.ClickException(str(exc)) from None
     cloud, keep = _load_cloud(cloud_path, [], err=output is None)  # notes apart from a CSV on stdout
     n = len(cloud.points)
     bad = (pairs < 0) | (pairs >= n)
@@ -215,9 +202,8 @@ def _query_cloud_pairs(model_spec, pretrained, cloud_path, pairs_csv, output, de
         raise click.ClickException(f"{pairs_csv}: pair {row + 1}: point {pairs[bad][0]} out of range: {name} has "
                                    f"{n} points")
     emb = _embed_cloud(_load_model(model_spec, pretrained, device, clouds=True), cloud, keep, cloud_path, precision)
-    local = np.searchsorted(keep, pairs)
-    kept = (local < len(keep)) & (keep[np.minimum(local, len(keep) - 1)] == pairs)
-    local = np.where(kept, local, 0)
+    kept = np.isin(pairs, keep)
+    local = np.where(kept, np.searchsorted(keep, pairs), 0)
     d = emb.distance(local[:, 0], local[:, 1])
     same = kept.all(axis=1) & (emb.part[local[:, 0]] == emb.part[local[:, 1]])
     d = np.where(same, d, np.nan)
@@ -232,8 +218,6 @@ def _query_cloud(model_spec, pretrained, cloud_path, source, output, suffix, exa
     """``gegnn query`` with a point-cloud model: the field of point ``source`` over the cloud, NaN at outliers
     and on other parts of its neighbour graph; with --exact --mesh, against the exact field on the mesh."""
     import numpy as np
-
-    from geodata.mesh import MeshError
 
     from ..queries.files import relative_errors
 
@@ -256,11 +240,9 @@ def _query_cloud(model_spec, pretrained, cloud_path, source, output, suffix, exa
     if exact:
         from ..fields.exact import exact_at_points
         from ..queries.files import load_query_mesh
-        try:
+        with _click_errors(f"{mesh_path}: --exact"):
             qm = load_query_mesh(mesh_path)
             exact_d, offset = exact_at_points(qm.mesh, points, source, model.config.distance)
-        except MeshError as exc:
-            raise click.ClickException(f"{mesh_path}: --exact: {exc.reason}") from None
         err = relative_errors(field, exact_d, qm.scale, source)
         _report_errors(err, f" on {Path(mesh_path).name}", f"; the points lie within {offset.max():.3g} of the surface")
     lit = cloud.normals
@@ -329,10 +311,8 @@ def _field_panels(field, exact_d, err, source: int, top: float) -> list:
 
 def _paths(emb, qm, src, dst, path_to, exact_d, name) -> list:
     """Trace the predicted path (and with the exact field, the edge-flip one); report; lines to draw."""
-    try:
+    with _click_errors(f"{name}: --path {path_to}"):
         path = emb.path(src, dst)
-    except ValueError as exc:
-        raise click.ClickException(f"{name}: --path {path_to}: {exc}") from None
     note = "" if path.traced else " (the field has a local minimum on the way: finished along edges)"
     click.echo(f"{name}: path to {path_to}: {len(path.points)} points, length {path.length:.4g}, predicted "
                f"distance {float(emb.distance(src, dst)):.4g}{note}")

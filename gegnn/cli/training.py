@@ -9,7 +9,7 @@ from pathlib import Path
 import click
 
 from ..config import GeGnnConfig
-from .inputs import _load_mesh, _load_model, _model_and_meshes, _output_suffix
+from .inputs import _click_errors, _load_mesh, _load_model, _model_and_meshes, _output_suffix
 from .options import DEVICE_OPTION, MODEL_ARG, PRETRAINED_HELP
 
 
@@ -96,21 +96,15 @@ def _blocks(ctx, param, value):
               help="Point-cloud model: each mesh's vertices are read as a cloud (faces unused): graph of the K "
                    "nearest neighbours (--points alone: 8), estimated normals, point-cloud heat-method landmark "
                    "fields (default 0: meshes). With --init, a mesh model's weights start it.")
-def train(store, run_dir, epochs, batch_size, lr, weight_decay, warmup_epochs, clip_grad, distance,
-          pairs_per_mesh, val_fraction, val_store, no_rotate, seed, device, workers, resume, deterministic,
-          field_cache, init_ckpt, channels, blocks, aggr, no_edge_length, no_relative_position, plain_grid_pool,
-          euclidean_decoder, landmarks, landmark_no_embedding, landmark_no_euclidean, spectral,
-          spectral_no_embedding, decoder_warmup, landmark_output, points):
+def train(run_dir, no_rotate, init_ckpt, channels, blocks, aggr, no_edge_length, no_relative_position,
+          plain_grid_pool, euclidean_decoder, landmarks, landmark_no_embedding, landmark_no_euclidean, spectral,
+          spectral_no_embedding, landmark_output, points, **options):
     """Train GeGnn on the geodata store STORE."""
     from ..training.loop import TrainConfig
     from ..training.loop import train as run_training
 
-    cfg = TrainConfig(store=store, run=run_dir, epochs=epochs, batch_size=batch_size, lr=lr,
-                      weight_decay=weight_decay, warmup_epochs=warmup_epochs, clip_grad=clip_grad,
-                      distance=distance, pairs_per_mesh=pairs_per_mesh, val_fraction=val_fraction, val_store=val_store,
-                      rotate=not no_rotate, seed=seed, device=device, workers=workers, resume=resume,
-                      init=init_ckpt, decoder_warmup=decoder_warmup, field_cache=field_cache,
-                      deterministic=deterministic)
+    # The other options are TrainConfig's fields by name (store, epochs, ..., deterministic).
+    cfg = TrainConfig(run=run_dir, rotate=not no_rotate, init=init_ckpt, **options)
     extra = dict(encoder_blocks=blocks, decoder_blocks=blocks) if blocks else {}
     model_cfg = GeGnnConfig(channels=channels, embed_dim=channels, decoder_hidden=channels, aggr=aggr,
                             edge_length=not no_edge_length, relative_position=not no_relative_position,
@@ -191,8 +185,6 @@ def finetune(files, pretrained, output, sources, held_out, decoder_steps, head_s
     """
     import time
 
-    from geodata.mesh import MeshError
-
     from ..finetune import finetune as run_finetune
 
     spec, (mesh_path,) = _model_and_meshes(files, pretrained)
@@ -203,14 +195,10 @@ def finetune(files, pretrained, output, sources, held_out, decoder_steps, head_s
     click.echo(f"{name}: {len(qm.mesh.vertices)} vertices; exact fields from {sources} + {held_out} sources, "
                f"then {decoder_steps} decoder, {head_steps} head and {steps} network steps")
     t0 = time.process_time()
-    try:
+    with _click_errors(mesh_path):
         r = run_finetune(model, qm.mesh.vertices, qm.mesh.faces, sources=sources, held_out=held_out,
                          decoder_steps=decoder_steps, head_steps=head_steps, steps=steps, head_lr=head_lr, lr=lr,
                          pairs_per_step=pairs_per_step, seed=seed, progress=True)
-    except MeshError as exc:
-        raise click.ClickException(f"{mesh_path}: {exc.reason}") from None
-    except ValueError as exc:
-        raise click.ClickException(f"{mesh_path}: {exc}") from None
     model.save(output, metadata={"finetuned_on": name, "finetune": dict(
         sources=sources, held_out=held_out, decoder_steps=decoder_steps, head_steps=head_steps, steps=steps,
         head_lr=head_lr, lr=lr, seed=seed,
