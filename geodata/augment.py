@@ -12,14 +12,13 @@ twists stay smooth.
 from __future__ import annotations
 
 import hashlib
-import io
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import trimesh
 
-from geodata.mesh import Mesh, MeshError, one_line
+from geodata.mesh import Mesh, MeshError, face_areas, one_line
 from geodata.stages.load import load_mesh_bytes
 from geodata.stages.repair import compact
 
@@ -89,7 +88,7 @@ def variant(mesh: Mesh, rng: np.random.Generator, cfg: AugmentConfig = AugmentCo
     if rng.random() < cfg.p_twist:
         v = twist(v, _random_frame(rng), rng.uniform(-cfg.max_angle, cfg.max_angle))
     if rng.random() < cfg.p_cut:
-        area = np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
+        area = face_areas(v, f)
         n = rng.integers(1, 4)
         centers = v[f[rng.choice(len(f), n, p=area / area.sum())]].mean(axis=1)
         f = cut(v, f, centers, rng.uniform(0.05, 0.15, n) * np.linalg.norm(np.ptp(v, axis=0)))
@@ -112,14 +111,13 @@ def augment_file(path: str, source: str, out_dir: str, cfg: AugmentConfig) -> di
         target = Path(out_dir) / f"{Path(source).with_suffix('')}.aug{k}.ply"
         try:
             m = variant(mesh, np.random.default_rng([cfg.seed, key, k]), cfg)
-            buf = io.BytesIO()
-            trimesh.Trimesh(m.vertices, m.faces, process=False).export(buf, file_type="ply")
+            ply = trimesh.Trimesh(m.vertices, m.faces, process=False).export(file_type="ply")
         except Exception as exc:  # a library error on one variant: report it, keep the others
             return {"source": source, "status": "failed", "error": f"[augment] {one_line(exc)}",
                     "written": written}
         target.parent.mkdir(parents=True, exist_ok=True)
         tmp = target.with_suffix(".ply.tmp")
-        tmp.write_bytes(buf.getvalue())
+        tmp.write_bytes(ply)
         tmp.replace(target)  # a killed run never leaves half a file under the final name
         written.append(str(target))
     return {"source": source, "status": "ok", "written": written}

@@ -35,7 +35,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from geodata.geodesic import sample_sources
-from geodata.mesh import Mesh, MeshError, label_groups, vertex_components
+from geodata.mesh import Mesh, MeshError, degenerate_faces, label_groups, vertex_components
 
 __all__ = ["biharmonic_distances", "biharmonic_pairs", "BiharmonicSolver", "cotan_operators", "ldlt"]
 
@@ -59,11 +59,7 @@ def cotan_operators(mesh: Mesh) -> tuple[sp.csc_matrix, np.ndarray]:
         raise MeshError(STAGE, "face index out of range")
     if np.bincount(f.ravel(), minlength=n).min() == 0:
         raise MeshError(STAGE, "unreferenced vertices")
-    e1 = v[f[:, 1]] - v[f[:, 0]]
-    e2 = v[f[:, 2]] - v[f[:, 0]]
-    area2 = np.linalg.norm(np.cross(e1, e2), axis=1)
-    scale2 = max(np.einsum("ij,ij->i", e1, e1).max(), np.einsum("ij,ij->i", e2, e2).max(), 1e-300)
-    n_degenerate = int((area2 <= 1e-14 * scale2).sum())
+    n_degenerate = int(degenerate_faces(mesh, 1e-14).sum())
     if n_degenerate:
         raise MeshError(STAGE, f"{n_degenerate} zero-area faces")
     L = sp.csc_matrix(igl.cotmatrix(v, f))
@@ -82,16 +78,14 @@ def ldlt(matrix: sp.csc_matrix):
 
 
 class _Component:
-    """One connected component: its vertices, masses and the L D L^T of -L with one vertex pinned."""
+    """One connected component (`verts`: its vertex ids, ascending): masses, L D L^T of -L with one vertex pinned."""
 
     def __init__(self, neg_L: sp.csc_matrix, m: np.ndarray, verts: np.ndarray):
-        self.verts = verts                          # global vertex ids, ascending
         self.n = len(verts)
         self.m = m[verts]
         self.area = float(self.m.sum())
-        self.pin = self.n - 1                       # any vertex gives the same distances
-        k = self.n - 1                              # size of the reduced system
-        self.k = k
+        # The pinned vertex (any gives the same distances) is the last: k = n - 1 rows remain.
+        self.pin = self.k = k = self.n - 1
         Lc = neg_L[verts][:, verts][:k, :k].tocsc()
         Lc = ((Lc + Lc.T) * 0.5).tocsc()
         try:
@@ -131,8 +125,7 @@ class BiharmonicSolver:
 
     def __init__(self, mesh: Mesh):
         L, m = cotan_operators(mesh)
-        n = mesh.n_vertices
-        self.n = n
+        self.n = n = mesh.n_vertices
         self.labels = vertex_components(mesh)
         self.n_components = int(self.labels.max()) + 1
         self.local = np.empty(n, dtype=np.int64)    # global vertex -> index inside its component
@@ -147,8 +140,6 @@ class BiharmonicSolver:
         sources = _indices(sources, self.n, "sources")
         tgt = np.arange(self.n) if targets is None else _indices(targets, self.n, "targets")
         out = np.full((len(sources), len(tgt)), np.nan)
-        if len(sources) == 0 or len(tgt) == 0:
-            return out
         s_lab = self.labels[sources]
         t_lab = self.labels[tgt]
         for c in np.unique(s_lab):
@@ -162,8 +153,7 @@ class BiharmonicSolver:
             mks = comp.m[:, None] * ks
             g_ss = np.einsum("ij,ij->j", ks, mks)
             # Targets in blocks: their Green's columns give g(y, y) and, by GEMM, g(s, y).
-            t_loc = self.local[tgt[t_cols]]
-            ut, t_inv = np.unique(t_loc, return_inverse=True)
+            ut, t_inv = np.unique(self.local[tgt[t_cols]], return_inverse=True)
             d2 = np.empty((len(uniq), len(ut)))
             for a in range(0, len(ut), _BLOCK):
                 kt = comp.green(ut[a:a + _BLOCK])                   # (n_c, b)
@@ -177,9 +167,7 @@ class BiharmonicSolver:
 
 
 def _indices(idx, n: int, name: str) -> np.ndarray:
-    idx = np.asarray(idx)
-    if idx.ndim != 1:
-        idx = idx.reshape(-1)
+    idx = np.asarray(idx).reshape(-1)
     if idx.size and not np.issubdtype(idx.dtype, np.integer):
         raise ValueError(f"{name} must be integer vertex indices")
     idx = idx.astype(np.int64)
@@ -189,12 +177,9 @@ def _indices(idx, n: int, name: str) -> np.ndarray:
 
 
 def biharmonic_distances(mesh: Mesh, sources: np.ndarray, targets: np.ndarray | None = None) -> np.ndarray:
-    """Exact biharmonic distances, float64 (len(sources), N) or (len(sources), len(targets)).
-
-    Row i holds d(sources[i], t) for every target t (every vertex when ``targets`` is None).
-    d(x, x) = 0; pairs in different connected components are NaN (undefined).
-    Raises MeshError("biharmonic", reason) for meshes whose Laplacian cannot be factorized.
-    """
+    """Exact biharmonic distances, float64: row i holds d(sources[i], t) for every target t (every vertex
+    when ``targets`` is None); d(x, x) = 0, NaN between connected components (undefined).
+    Raises MeshError("biharmonic", reason) for meshes whose Laplacian cannot be factorized."""
     return BiharmonicSolver(mesh).distances(sources, targets)
 
 
@@ -206,16 +191,13 @@ def biharmonic_pairs(mesh: Mesh, n_pairs: int, rng: np.random.Generator) -> tupl
     ``[source, target]`` grouped by source (in draw order) with targets ascending.
     Returns (uint32 (P, 2), float32 (P,)).
     """
-    n = mesh.n_vertices
-    empty = (np.zeros((0, 2), dtype=np.uint32), np.zeros(0, dtype=np.float32))
-    if n_pairs <= 0 or n < 2:
-        return empty
+    if n_pairs <= 0 or mesh.n_vertices < 2:
+        return np.zeros((0, 2), dtype=np.uint32), np.zeros(0, dtype=np.float32)
     solver = BiharmonicSolver(mesh)
     sources = sample_sources(solver.labels, n_pairs, rng).astype(np.int64)
-    n_sources = len(sources)
     dist = solver.distances(sources)                           # (S, N)
     same = solver.labels[sources][:, None] == solver.labels[None, :]
-    same[np.arange(n_sources), sources] = False
+    same[np.arange(len(sources)), sources] = False
     s_idx, t_idx = np.nonzero(same)                            # row-major: grouped by source
     pairs = np.stack([sources[s_idx], t_idx], axis=1).astype(np.uint32)
     return pairs, dist[s_idx, t_idx].astype(np.float32)

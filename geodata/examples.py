@@ -28,12 +28,8 @@ def _flip(mesh):
 
 def _soup(*parts) -> trimesh.Trimesh:
     """Concatenate parts without merging anything: intersecting, duplicated, unprocessed."""
-    vertices, faces, offset = [], [], 0
-    for part in parts:
-        vertices.append(np.asarray(part.vertices))
-        faces.append(np.asarray(part.faces) + offset)
-        offset += len(part.vertices)
-    return trimesh.Trimesh(np.concatenate(vertices), np.concatenate(faces), process=False)
+    vertices, faces = trimesh.util.append_faces([p.vertices for p in parts], [p.faces for p in parts])
+    return trimesh.Trimesh(vertices, faces, process=False)
 
 
 def example_soups() -> dict[str, trimesh.Trimesh]:

@@ -17,7 +17,7 @@ from typing import Callable
 
 import numpy as np
 
-from geodata.mesh import Mesh, MeshError, closed_manifold_problem, vertex_components
+from geodata.mesh import Mesh, MeshError, require_closed_manifold, vertex_components
 
 __all__ = ["BACKENDS", "geodesic_solver", "exact_geodesic_distances", "sample_sources", "exact_geodesic_pairs",
            "polyline_length", "edge_flip_paths"]
@@ -92,19 +92,15 @@ def exact_geodesic_pairs(mesh: Mesh, n_pairs: int, rng: np.random.Generator, bac
     any backend, such a source is skipped for the next one and returned as the third value. A mesh where
     more than a tenth of the sources fail is refused.
     """
-    problem = closed_manifold_problem(mesh)
-    if problem is not None:  # would crash the native code
-        raise MeshError("geodesic", problem)
+    require_closed_manifold(mesh, "geodesic")  # a broken mesh would crash the native code
     solve = geodesic_solver(mesh, backend)
     labels = vertex_components(mesh)
-    sizes = np.bincount(labels)
     pairs, dists, skipped, total = [], [], [], 0
     for s in rng.permutation(mesh.n_vertices):
         if total >= n_pairs:
             break
         d = solve(int(s))
-        targets = np.flatnonzero(labels == labels[s])
-        targets = targets[targets != s]
+        targets = np.flatnonzero((labels == labels[s]) & (np.arange(len(labels)) != s))
         if not (np.isfinite(d[targets]).all() and (d[targets] > 0).all()):
             skipped.append(s)
             if len(skipped) > max(2, len(pairs) // 10):
@@ -112,6 +108,6 @@ def exact_geodesic_pairs(mesh: Mesh, n_pairs: int, rng: np.random.Generator, bac
             continue
         pairs.append(np.stack([np.full(len(targets), s), targets], axis=1))
         dists.append(d[targets])
-        total += sizes[labels[s]] - 1
+        total += len(targets)
     return (np.concatenate(pairs).astype(np.uint32), np.concatenate(dists).astype(np.float32),
             np.array(skipped, dtype=np.int64))

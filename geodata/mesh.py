@@ -6,7 +6,8 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["Mesh", "MeshError", "one_line", "unique_edges", "edge_face_counts", "closed_manifold_problem",
-           "vertex_components", "label_groups", "component_volumes", "degenerate_faces", "vertex_normals", "require_closed_manifold"]
+           "vertex_components", "label_groups", "component_volumes", "face_areas", "degenerate_faces",
+           "vertex_normals", "require_closed_manifold"]
 
 
 class MeshError(Exception):
@@ -39,12 +40,10 @@ class Mesh:
 
     @property
     def n_vertices(self) -> int:
-        """Number of vertices."""
         return len(self.vertices)
 
     @property
     def n_faces(self) -> int:
-        """Number of faces."""
         return len(self.faces)
 
 
@@ -63,8 +62,14 @@ def edge_face_counts(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.stack([keys // n, keys % n], axis=1).astype(faces.dtype), counts
 
 
-def degenerate_faces(mesh: Mesh) -> np.ndarray:
-    """Mask of (numerically) zero-area faces: twice the area below 1e-12 x the longest edge squared.
+def face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Area of each triangle (F,)."""
+    v, f = vertices, faces
+    return 0.5 * np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
+
+
+def degenerate_faces(mesh: Mesh, rel: float = 1e-12) -> np.ndarray:
+    """Mask of (numerically) zero-area faces: twice the area below `rel` x the longest edge squared.
 
     Remeshing and collapses can leave collinear triangles; cotangent weights and Kirsanov's exact
     geodesics are undefined on them.
@@ -73,7 +78,7 @@ def degenerate_faces(mesh: Mesh) -> np.ndarray:
     e1, e2 = v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]
     area2 = np.linalg.norm(np.cross(e1, e2), axis=1)
     longest2 = max(np.einsum("ij,ij->i", e1, e1).max(), np.einsum("ij,ij->i", e2, e2).max(), 1e-300)
-    return area2 <= 1e-12 * longest2
+    return area2 <= rel * longest2
 
 
 def closed_manifold_problem(mesh: Mesh, *, zero_area_ok: bool = False) -> str | None:
@@ -125,12 +130,10 @@ def _pinched_vertices(faces: np.ndarray, n: int) -> bool:
     nxt = faces[:, [1, 2, 0]].reshape(-1)
     prv = faces[:, [2, 0, 1]].reshape(-1)
     # Nodes are (vertex, link vertex) half-pairs; link edges join (c, nxt) and (c, prv).
-    key_a = corner * n + nxt
-    key_b = corner * n + prv
-    keys, inv = np.unique(np.concatenate([key_a, key_b]), return_inverse=True)
+    keys, inv = np.unique(np.concatenate([corner * n + nxt, corner * n + prv]), return_inverse=True)
     m = len(corner)
     g = sp.coo_matrix((np.ones(m), (inv[:m], inv[m:])), shape=(len(keys), len(keys)))
-    n_comp, labels = connected_components(g, directed=False)
+    labels = connected_components(g, directed=False)[1]
     owner = keys // n
     comps_per_vertex = np.bincount(owner[np.unique(labels, return_index=True)[1]], minlength=n)
     return bool((comps_per_vertex > 1).any())
@@ -179,5 +182,4 @@ def vertex_normals(mesh: Mesh) -> np.ndarray:
     n = np.zeros_like(v)
     for k in range(3):
         np.add.at(n, f[:, k], fn)
-    norm = np.linalg.norm(n, axis=1, keepdims=True)
-    return n / np.maximum(norm, 1e-30)
+    return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)

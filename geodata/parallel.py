@@ -49,11 +49,11 @@ def run_isolated(fn: Callable[..., Any], *args, timeout: float | None = None,
     if warnings_out is not None:
         warnings_out.extend(m[1] for m in messages if m[0] == "warning")
     stage = next((m[1] for m in reversed(messages) if m[0] == "stage"), "unknown")
-    final = messages[-1] if messages and messages[-1][0] in ("result", "error") else None
-    if final is not None and final[0] == "result":
-        return final[1]
-    if final is not None:
-        raise MeshError(*final[1])
+    last = messages[-1] if messages else (None, None)
+    if last[0] == "result":
+        return last[1]
+    if last[0] == "error":
+        raise MeshError(*last[1])
     if timed_out:
         raise MeshError(stage, f"timed out after {timeout:g} s")
     if os.WIFSIGNALED(wait_status):
@@ -97,8 +97,7 @@ def _child(fn, args, write_fd: int) -> None:
             message = ("error", ("unknown", "out of memory"))
         except Exception as exc:  # any bug must still become a one-line failure of this mesh
             message = ("error", ("unknown", one_line(exc)))
-        payload = pickle.dumps(message, protocol=pickle.HIGHEST_PROTOCOL)
-        view = memoryview(payload)
+        view = memoryview(pickle.dumps(message, protocol=pickle.HIGHEST_PROTOCOL))
         while view:
             view = view[os.write(write_fd, view):]
     except BaseException:

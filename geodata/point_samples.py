@@ -16,7 +16,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from geodata.mesh import Mesh, vertex_components, vertex_normals
+from geodata.mesh import Mesh, face_areas, vertex_components, vertex_normals
 from geodata.surface_points import insert_points
 
 __all__ = ["SurfaceSamples", "sample_points", "point_pairs"]
@@ -35,7 +35,7 @@ class SurfaceSamples(NamedTuple):
 def sample_points(mesh: Mesh, n: int, rng: np.random.Generator) -> SurfaceSamples:
     """``n`` area-uniform points of ``mesh`` with interpolated vertex normals (see the module)."""
     tri = mesh.vertices[mesh.faces]
-    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    area = face_areas(mesh.vertices, mesh.faces)
     if not area.sum() > 0:
         raise ValueError("the mesh has no area to sample")
     face = rng.choice(len(area), size=n, p=area / area.sum())
@@ -61,7 +61,6 @@ def point_pairs(mesh: Mesh, samples: SurfaceSamples, pairs: int, rng: np.random.
     out_pairs, out_dist = [], []
     for s in sources:
         targets = np.flatnonzero((component == component[s]) & (np.arange(n) != s))
-        d = solve(int(vertex[s]))[vertex[targets]]
         out_pairs.append(np.stack([np.full(len(targets), s), targets], axis=1))
-        out_dist.append(d)
+        out_dist.append(solve(int(vertex[s]))[vertex[targets]])
     return (np.concatenate(out_pairs).astype(np.int64), np.concatenate(out_dist).astype(np.float32))

@@ -24,9 +24,8 @@ from geodata.stages.remesh import remesh, simplify
 from geodata.stages.watertight import watertight
 
 __all__ = ["PrepareConfig", "MeshTask", "raw_root", "discover", "read_list", "make_tasks", "mesh_rng", "run_stage",
-           "prepare_geometry", "prepare_mesh", "process_task", "STAGES"]
+           "prepare_geometry", "prepare_mesh", "process_task"]
 
-STAGES = ("load", "watertight", "remesh", "simplify", "normalize", "geodesic")
 LIBRARIES = ("geogegnn", "trimesh", "manifold3d", "pymeshlab", "fast-simplification", "tvb-gdist", "libigl", "numpy")
 
 
@@ -41,9 +40,7 @@ class PrepareConfig:
 
     def store_params(self) -> dict:
         """The parameters that decide the data (a store holds one setting of them)."""
-        p = asdict(self)
-        del p["timeout"]
-        return p
+        return {k: v for k, v in asdict(self).items() if k != "timeout"}
 
 
 @dataclass(frozen=True)
@@ -200,8 +197,7 @@ def process_task(task: MeshTask, out: str, config: PrepareConfig) -> dict:
     store.commit(out, f"meshes/{task.mesh_id}")
     store.clear_failure(out, task.mesh_id)
     return {**row, "status": "ok", "timings": computed["timings"], "n_vertices": attrs["n_vertices"],
-            "notes": computed["warnings"],
-            "seconds": time.perf_counter() - start}
+            "notes": computed["warnings"], "seconds": time.perf_counter() - start}
 
 
 def select_tasks(raw_dir: str | Path, out: str, shard: tuple[int, int], retry_failed: bool,

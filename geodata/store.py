@@ -10,6 +10,7 @@ parents are created once, before any worker starts (concurrent creation races, z
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import time
 from pathlib import Path
@@ -41,20 +42,17 @@ def create_store(out: str | Path, params: dict) -> zarr.Group:
         diff = {k: v for k, v in root.attrs.get("params", {}).items() if params.get(k) != v}
         raise StoreError(f"{out} was made with {diff}; use another OUT for other parameters")
     for name in ("meshes", "failed"):
-        try:
+        with contextlib.suppress(zarr.errors.ContainsGroupError):  # another shard made it between check and write
             root.require_group(name)
-        except zarr.errors.ContainsGroupError:  # another shard created it between check and write
-            pass
     return root
 
 
 def _open_or_create_root(out: str, attrs: dict, attempts: int = 50) -> zarr.Group:
     """Open the root group, or create it; several shards may start at the same moment."""
     for _ in range(attempts):
-        try:
+        # Else missing, or its metadata is being written this instant.
+        with contextlib.suppress(FileNotFoundError, zarr.errors.GroupNotFoundError, json.JSONDecodeError):
             return zarr.open_group(out, mode="r+")
-        except (FileNotFoundError, zarr.errors.GroupNotFoundError, json.JSONDecodeError):
-            pass  # missing, or its metadata is being written this instant
         try:
             return zarr.open_group(out, mode="w-", attributes=attrs)
         except (zarr.errors.ContainsGroupError, FileExistsError):
@@ -83,8 +81,7 @@ def group_attrs(out: str | Path, path: str) -> dict | None:
 
 def mesh_status(out: str | Path, path: str) -> str | None:
     """The status of meshes/<path> ("ok" once committed), or None when missing or half-written."""
-    attrs = group_attrs(out, f"meshes/{path}")
-    return None if attrs is None else attrs.get("status")
+    return (group_attrs(out, f"meshes/{path}") or {}).get("status")
 
 
 def write_group(out: str | Path, path: str, arrays: dict[str, np.ndarray], attrs: dict) -> zarr.Group:
@@ -118,7 +115,7 @@ def clear_failure(out: str | Path, mesh_id: str) -> None:
         del root[f"failed/{mesh_id}"]
 
 
-def _children(out: str, parent: str) -> list[str]:
+def _children(out: str | Path, parent: str) -> list[str]:
     base = Path(out) / parent
     if base.is_dir():  # local store: a directory listing is far cheaper than zarr's async walk
         return sorted(p.name for p in base.iterdir() if p.is_dir())
@@ -127,13 +124,11 @@ def _children(out: str, parent: str) -> list[str]:
 
 def list_meshes(out: str | Path) -> dict[str, dict | None]:
     """Every mesh group under meshes/ with its attrs (None when unreadable)."""
-    out = str(out)
     return {mesh_id: group_attrs(out, f"meshes/{mesh_id}") for mesh_id in _children(out, "meshes")}
 
 
 def list_failures(out: str | Path) -> dict[str, dict]:
     """The recorded failures: mesh id -> {source, stage, error}."""
-    out = str(out)
     failures = {mesh_id: group_attrs(out, f"failed/{mesh_id}") for mesh_id in _children(out, "failed")}
     return {k: v for k, v in failures.items() if v is not None}
 

@@ -135,12 +135,8 @@ class _Subdivision:
     def _locate(self, f: int, b: tuple) -> tuple[int, tuple]:
         """The sub-face of face f that contains b (the one whose smallest barycentric coordinate of b is
         largest, robust to rounding on shared edges) and b's barycentric coordinates in it."""
-        best = None
-        for s in self.subs.get(f, (f,)):
-            lam = _barycentric(self.coords.get(s, _IDENTITY), b)
-            if best is None or min(lam) > min(best[1]):
-                best = (s, lam)
-        return best
+        candidates = ((s, _barycentric(self.coords.get(s, _IDENTITY), b)) for s in self.subs.get(f, (f,)))
+        return max(candidates, key=lambda pair: min(pair[1]))
 
     def _split_face(self, s: int, v: int, b: tuple):
         """Sub-face s into three around its interior vertex v (barycentric b in its face)."""

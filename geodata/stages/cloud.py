@@ -44,12 +44,7 @@ def load_cloud_file(path) -> PointCloud:
     suffix = path.suffix.lower()
     if suffix not in CLOUD_SUFFIXES:
         raise MeshError("load", f"not a point-cloud file ({', '.join(CLOUD_SUFFIXES)})")
-    if suffix == ".npy":
-        columns = _npy_columns(path)
-    elif suffix == ".ply":
-        columns = _ply_columns(path)
-    else:
-        columns = _text_columns(path.read_bytes())
+    columns = {".npy": _npy_columns, ".ply": _ply_columns}.get(suffix, _text_columns)(path)
     if len(columns) == 0:
         raise MeshError("load", "no points")
     cloud = PointCloud(np.ascontiguousarray(columns[:, :3], dtype=np.float64))
@@ -82,8 +77,8 @@ def outliers(points: np.ndarray, k: int = OUTLIER_K, ratio: float = OUTLIER_RATI
     return np.flatnonzero(spread > ratio * np.maximum(local, 1e-300))
 
 
-def _text_columns(data: bytes) -> np.ndarray:
-    text = data.decode("utf-8", errors="replace")
+def _text_columns(path: Path) -> np.ndarray:
+    text = path.read_bytes().decode("utf-8", errors="replace")
     rows, width, start = [], None, None
     for number, line in enumerate(text.splitlines(), 1):
         line = line.split("#", 1)[0].strip()
@@ -131,11 +126,11 @@ def _npy_columns(path: Path) -> np.ndarray:
 def _ply_columns(path: Path) -> np.ndarray:
     import trimesh
 
-    data = path.read_bytes()
     try:
         loaded = trimesh.load(path, file_type="ply", process=False)
     except Exception:  # trimesh raises many types for garbage input
-        raise MeshError("load", explain(data, ".ply") or "the data does not follow the PLY format") from None
+        reason = explain(path.read_bytes(), ".ply") or "the data does not follow the PLY format"
+        raise MeshError("load", reason) from None
     points = np.asarray(getattr(loaded, "vertices", np.zeros((0, 3))), dtype=np.float64)
     raw = loaded.metadata.get("_ply_raw", {}).get("vertex", {}).get("data")  # {property: values}
     names = raw.dtype.names if isinstance(raw, np.ndarray) else raw if isinstance(raw, dict) else ()

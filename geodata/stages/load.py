@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from geodata.mesh import Mesh, MeshError, one_line
+from geodata.mesh import Mesh, MeshError, face_areas, one_line
 from geodata.stages.polygons import (PolygonError, off_layout, triangulate_faces, triangulate_obj_text,
                                      triangulate_off_text)
 
@@ -48,17 +48,12 @@ def _library_log_as_warnings():
 
 
 def load_mesh_bytes(data: bytes, suffix: str, return_map: bool = False):
-    """Parse a mesh file's bytes (format from `suffix`), validate it and clean it.
-
-    Raises MeshError("load", reason) for anything that is not a usable triangle mesh.
-    """
+    """Parse a mesh file's bytes (format from `suffix`), validate and clean the mesh (see `load_mesh_file`);
+    MeshError("load", reason) for anything that is not a usable triangle mesh."""
     if len(data) == 0:
         raise MeshError("load", "empty file")
     data = _utf8_text(data, suffix)
-    try:
-        parsed = _triangulated(data, suffix)
-    except PolygonError as exc:
-        raise MeshError("load", str(exc)) from None
+    parsed = _triangulated(data, suffix)
     try:
         # process=False: keep the file's indices so validation sees what the file really says;
         # maintain_order: an OBJ's vertices are not split at texture or normal seams, so vertex k of
@@ -113,14 +108,15 @@ def _ply_polygons(loaded):
 
 
 def _triangulated(data: bytes, suffix: str) -> bytes:
-    """OBJ/OFF polygon faces ear-clipped in their plane (trimesh would fan them: wrong when concave)."""
+    """OBJ/OFF polygon faces ear-clipped in their plane (trimesh would fan them: wrong when concave);
+    MeshError where a polygon cannot be."""
     triangulate = {".obj": triangulate_obj_text, ".off": triangulate_off_text}.get(suffix.lower())
     if triangulate is None:
         return data
     try:
         return triangulate(data.decode("utf-8")).encode("utf-8")
-    except PolygonError:
-        raise
+    except PolygonError as exc:
+        raise MeshError("load", str(exc)) from None
     except (ValueError, IndexError):
         return data  # malformed: the parser and `explain` say why
 
@@ -185,10 +181,9 @@ def _file_vertex_count(data: bytes, suffix: str) -> int:
 
 
 def _explain_obj(data: bytes) -> str | None:
-    lines = data.decode("latin-1").splitlines()
     n = _obj_vertex_count(data)
     seen, width = 0, None
-    for number, line in enumerate(lines, 1):
+    for number, line in enumerate(data.decode("latin-1").splitlines(), 1):
         words = line.split()
         if line.startswith(("v ", "v\t")):
             seen += 1
@@ -287,11 +282,10 @@ def _explain_ply(data: bytes) -> str | None:
     counts = dict(elements)
     nv, nf = counts.get("vertex", 0), counts.get("face", 0)
     if fmt == "ascii":
-        held = len(_data_lines(body.decode("latin-1").splitlines()))
-        if held < sum(counts.values()):
-            return f"PLY header declares {nv} vertices and {nf} faces but the file holds {held} data lines"
-        bad = next(((k, w) for k, line in enumerate(_data_lines(body.decode("latin-1").splitlines()), 1)
-                    for w in line.split() if not is_number(w)), None)
+        rows = _data_lines(body.decode("latin-1").splitlines())
+        if len(rows) < sum(counts.values()):
+            return f"PLY header declares {nv} vertices and {nf} faces but the file holds {len(rows)} data lines"
+        bad = next(((k, w) for k, line in enumerate(rows, 1) for w in line.split() if not is_number(w)), None)
         if bad:
             return f"data line {bad[0]} after the header: {bad[1]!r} is not a number"
     elif elements and elements[0][0] == "vertex" and nv * scalar_bytes.get("vertex", 0) > len(body):
@@ -340,11 +334,8 @@ def clean(vertices: np.ndarray, faces: np.ndarray, return_map: bool = False):
     keep = (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 2] != faces[:, 0])
     faces = faces[keep]
     if len(faces):
-        e1 = unique[faces[:, 1]] - unique[faces[:, 0]]
-        e2 = unique[faces[:, 2]] - unique[faces[:, 0]]
-        area2 = np.linalg.norm(np.cross(e1, e2), axis=1)
         scale = np.ptp(unique, axis=0).max()
-        faces = faces[area2 > 1e-12 * scale * scale]
+        faces = faces[2 * face_areas(unique, faces) > 1e-12 * scale * scale]
     if len(faces) == 0:
         raise MeshError("load", "all faces are degenerate (zero area)")
     used, compact = np.unique(faces, return_inverse=True)

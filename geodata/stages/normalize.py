@@ -11,9 +11,7 @@ __all__ = ["normalize", "normalization"]
 def normalization(vertices: np.ndarray) -> tuple[np.ndarray, float]:
     """Center and scale mapping a mesh into [-1, 1]^3: normalized = (v - center) / scale."""
     lo, hi = vertices.min(axis=0), vertices.max(axis=0)
-    center = (lo + hi) / 2
-    scale = float((hi - lo).max() / 2)
-    return center, scale
+    return (lo + hi) / 2, float((hi - lo).max() / 2)
 
 
 def normalize(mesh: Mesh) -> Mesh:

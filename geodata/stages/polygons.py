@@ -31,22 +31,16 @@ class PolygonError(ValueError):
 def triangulate_polygon(points: np.ndarray) -> list[tuple[int, int, int]]:
     """Triangles (corner indices into ``points``, (n, 3)) of one simple polygon, wound as the polygon.
 
-    Repeated corners (bridge edges joining a hole to the outer ring) are allowed. A polygon without
-    area (its corners on a line or a point, common in catalog files) has no triangles, as a zero-area
-    triangle is dropped; a quad always splits along one of its diagonals (the one whose two triangles
-    face the quad's way), even when non-planar.
-    """
+    Repeated corners (bridge edges joining a hole to the outer ring) are allowed; a polygon without area
+    has no triangles, and a quad splits along a diagonal even when non-planar (see the module)."""
     points = np.asarray(points, dtype=np.float64)
     if len(points) == 3:
         return [(0, 1, 2)]
     if len(points) == 4:
         return _split_quad(points)  # zero-area triangles are dropped by the load stage
     extent = np.ptp(points, axis=0).max()
-    try:
-        xy = _project(points)
-    except PolygonError:
-        return []  # no area in any plane
-    area = _signed_area(xy)
+    xy = _project(points)
+    area = 0.0 if xy is None else _signed_area(xy)  # None: no area in any plane
     if abs(area) <= FLAT_AREA * extent * extent:
         return []
     order = list(range(len(xy))) if area > 0 else list(range(len(xy)))[::-1]
@@ -57,25 +51,34 @@ def triangulate_polygon(points: np.ndarray) -> list[tuple[int, int, int]]:
     return tris if area > 0 else [(a, c, b) for a, b, c in tris]
 
 
+def _faithful(points: np.ndarray, where: str) -> list[tuple[int, int, int]]:
+    """triangulate_polygon, its refusal naming the face (`where`: its line, or its number)."""
+    try:
+        return triangulate_polygon(points)
+    except PolygonError as exc:
+        raise PolygonError(f"{where}: polygon of {len(points)} corners cannot be triangulated faithfully: "
+                           f"{exc}") from None
+
+
 def _split_quad(p: np.ndarray) -> list[tuple[int, int, int]]:
     """The diagonal whose two triangles' normals agree best (both face the quad's way when convex)."""
     def agreement(t1, t2):
-        n1 = np.cross(p[t1[1]] - p[t1[0]], p[t1[2]] - p[t1[0]])
-        n2 = np.cross(p[t2[1]] - p[t2[0]], p[t2[2]] - p[t2[0]])
+        n1, n2 = (np.cross(p[b] - p[a], p[c] - p[a]) for a, b, c in (t1, t2))
         return float(n1 @ n2) / max(np.linalg.norm(n1) * np.linalg.norm(n2), 1e-300)
 
     splits = [[(0, 1, 2), (0, 2, 3)], [(0, 1, 3), (1, 2, 3)]]
     return max(splits, key=lambda pair: agreement(*pair))
 
 
-def _project(points: np.ndarray) -> np.ndarray:
+def _project(points: np.ndarray) -> np.ndarray | None:
+    """The polygon in its plane (Newell's normal); None when it has no normal."""
     nxt = np.roll(points, -1, axis=0)
     normal = np.array([np.sum((points[:, 1] - nxt[:, 1]) * (points[:, 2] + nxt[:, 2])),
                        np.sum((points[:, 2] - nxt[:, 2]) * (points[:, 0] + nxt[:, 0])),
                        np.sum((points[:, 0] - nxt[:, 0]) * (points[:, 1] + nxt[:, 1]))])  # Newell
     norm = np.linalg.norm(normal)
     if not norm > 0:
-        raise PolygonError("zero area")
+        return None
     normal /= norm
     u = np.cross(normal, [1.0, 0, 0] if abs(normal[0]) < 0.9 else [0, 1.0, 0])
     u /= np.linalg.norm(u)
@@ -97,41 +100,31 @@ def _ear_clip(xy: np.ndarray, order: list[int]) -> list[tuple[int, int, int]]:
     scale = np.ptp(xy, axis=0).max()
     eps = 1e-12 * scale * scale
     while len(idx) > 3:
-        n = len(idx)
-        pts = xy[idx]
-        clipped = False
-        for allow_flat in (False, True):  # a zero-area ear only when no proper one is left
-            for k in range(n):
-                a, b, c = pts[k - 1], pts[k], pts[(k + 1) % n]
-                area = _tri_area(a, b, c)
-                if area < -eps or (area <= eps and not allow_flat):
-                    continue
-                if area > eps and _holds_other_corner(pts, k, a, b, c, eps):
-                    continue
-                tris.append((idx[k - 1], idx[k], idx[(k + 1) % n]))
-                del idx[k]
-                clipped = True
-                break
-            if clipped:
-                break
-        if not clipped:
+        n, pts = len(idx), xy[idx]
+        # A zero-area ear only when no proper one is left.
+        k = next((k for allow_flat in (False, True) for k in range(n) if _is_ear(pts, k, eps, allow_flat)), None)
+        if k is None:
             raise PolygonError("no ear to clip (self-intersecting in its plane)")
+        tris.append((idx[k - 1], idx[k], idx[(k + 1) % n]))
+        del idx[k]
     tris.append(tuple(idx))
     return [t for t in tris if abs(_tri_area(*xy[list(t)])) > eps]
 
 
-def _holds_other_corner(pts, k, a, b, c, eps) -> bool:
-    """Is a corner other than the ear's own (or a copy of one) inside or on the triangle a, b, c?"""
+def _is_ear(pts: np.ndarray, k: int, eps: float, allow_flat: bool) -> bool:
+    """Does corner k clip off: its triangle a, b, c turns left (or is flat, when `allow_flat`) and no
+    corner other than the ear's own (or a copy of one) is inside or on it?"""
     n = len(pts)
+    a, b, c = pts[k - 1], pts[k], pts[(k + 1) % n]
+    area = _tri_area(a, b, c)
+    if area <= eps:
+        return allow_flat and area >= -eps
     others = np.delete(pts, [(k - 1) % n, k, (k + 1) % n], axis=0)
-    if not len(others):
-        return False
-    same = (np.all(others == a, axis=1) | np.all(others == b, axis=1) | np.all(others == c, axis=1))
-    others = others[~same]
+    others = others[~(np.all(others == a, axis=1) | np.all(others == b, axis=1) | np.all(others == c, axis=1))]
     d1 = (b[0] - a[0]) * (others[:, 1] - a[1]) - (b[1] - a[1]) * (others[:, 0] - a[0])
     d2 = (c[0] - b[0]) * (others[:, 1] - b[1]) - (c[1] - b[1]) * (others[:, 0] - b[0])
     d3 = (a[0] - c[0]) * (others[:, 1] - c[1]) - (a[1] - c[1]) * (others[:, 0] - c[0])
-    return bool(np.any((d1 >= -eps) & (d2 >= -eps) & (d3 >= -eps)))
+    return not np.any((d1 >= -eps) & (d2 >= -eps) & (d3 >= -eps))
 
 
 def triangulate_obj_text(text: str) -> str:
@@ -139,8 +132,7 @@ def triangulate_obj_text(text: str) -> str:
     relative (negative) vertex indices made absolute: trimesh counts them from the file's end, the OBJ
     format from the face's own line."""
     lines = text.splitlines()
-    faces = [k for k, line in enumerate(lines) if line.startswith(("f ", "f\t"))]
-    if not any(len(lines[k].split()) > 4 or "-" in lines[k] for k in faces):
+    if not any(len(line.split()) > 4 or "-" in line for line in lines if line.startswith(("f ", "f\t"))):
         return text
     positions = np.array([[float(t) for t in line.split()[1:4]] for line in lines
                           if line.startswith(("v ", "v\t"))]).reshape(-1, 3)
@@ -159,12 +151,7 @@ def triangulate_obj_text(text: str) -> str:
         corners = [int(t.split("/")[0]) - 1 for t in tokens]
         if min(corners) < 0 or max(corners) >= len(positions):
             raise ValueError("a corner out of range")  # left to the parser and load.explain
-        try:
-            tris = triangulate_polygon(positions[corners])
-        except PolygonError as exc:
-            raise PolygonError(f"line {number}: polygon of {len(tokens)} corners cannot be triangulated "
-                               f"faithfully: {exc}") from None
-        out += [f"f {tokens[a]} {tokens[b]} {tokens[c]}" for a, b, c in tris]
+        out += [f"f {tokens[a]} {tokens[b]} {tokens[c]}" for a, b, c in _faithful(positions[corners], f"line {number}")]
     return "\n".join(out) + "\n"
 
 
@@ -200,7 +187,6 @@ def triangulate_off_text(text: str) -> str:
     if layout is None:
         return text
     data, first, nv, nf = layout
-    counts_line = data[first - 1]
     vertex_lines, face_lines = data[first:first + nv], data[first + nv:first + nv + nf]
     if not any(int(lines[k].split()[0]) > 3 for k in face_lines):
         return text
@@ -215,13 +201,9 @@ def triangulate_off_text(text: str) -> str:
         corners = [int(w) for w in words[1:1 + n]]
         if len(corners) < n or min(corners) < 0 or max(corners) >= len(positions):
             raise ValueError("a corner missing or out of range")  # left to the parser and load.explain
-        try:
-            tris = triangulate_polygon(positions[corners])
-        except PolygonError as exc:
-            raise PolygonError(f"line {k + 1}: polygon of {n} corners cannot be triangulated faithfully: "
-                               f"{exc}") from None
+        tris = _faithful(positions[corners], f"line {k + 1}")
         faces += [f"3 {corners[a]} {corners[b]} {corners[c]}" for a, b, c in tris]
-    lines[counts_line] = (f"{lines[data[0]].split()[0]} " if first == 1 else "") + f"{nv} {len(faces)} 0"
+    lines[data[first - 1]] = (f"{lines[data[0]].split()[0]} " if first == 1 else "") + f"{nv} {len(faces)} 0"
     return "\n".join(lines[:face_lines[0]] + faces + lines[face_lines[-1] + 1:]) + "\n"
 
 
@@ -239,10 +221,6 @@ def triangulate_faces(vertices: np.ndarray, polygons) -> np.ndarray:
         if len(corners) == 3:
             tris.append(corners[None])
             continue
-        try:
-            local = triangulate_polygon(vertices[corners])
-        except PolygonError as exc:
-            raise PolygonError(f"face {number} (counted from 0): polygon of {len(corners)} corners cannot be "
-                               f"triangulated faithfully: {exc}") from None
+        local = _faithful(vertices[corners], f"face {number} (counted from 0)")
         tris.append(corners[np.asarray(local, dtype=np.int64).reshape(-1, 3)])
     return np.concatenate(tris) if tris else np.zeros((0, 3), dtype=np.int64)

@@ -16,8 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from geodata.mesh import Mesh, MeshError, closed_manifold_problem
-from geodata.stages.repair import compact, meshset_mesh, remove_degenerate_faces
+from geodata.mesh import Mesh, MeshError, closed_manifold_problem, face_areas
+from geodata.stages.repair import compact, meshlab_filter, remove_degenerate_faces
 
 __all__ = ["remesh", "simplify"]
 
@@ -35,19 +35,12 @@ _TOLERANCE = 0.06          # accept a remesh whose vertex count is within 6% of 
 _MAX_TRIES = 3
 
 
-def _area(v: np.ndarray, f: np.ndarray) -> float:
-    a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
-    return float(0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum())
-
-
 def _isotropic(mesh: Mesh, length: float, iterations: int, checksurfdist: bool) -> Mesh:
     import pymeshlab
 
-    ms = pymeshlab.MeshSet()
-    ms.add_mesh(pymeshlab.Mesh(vertex_matrix=mesh.vertices, face_matrix=mesh.faces))
-    ms.meshing_isotropic_explicit_remeshing(iterations=iterations, targetlen=pymeshlab.PureValue(length),
-                                            featuredeg=_FEATURE_DEG, checksurfdist=checksurfdist)
-    return remove_degenerate_faces(meshset_mesh(ms))
+    return remove_degenerate_faces(meshlab_filter(
+        mesh, "meshing_isotropic_explicit_remeshing", iterations=iterations, targetlen=pymeshlab.PureValue(length),
+        featuredeg=_FEATURE_DEG, checksurfdist=checksurfdist))
 
 
 def _presimplify(mesh: Mesh, tolerance: float) -> Mesh:
@@ -55,11 +48,8 @@ def _presimplify(mesh: Mesh, tolerance: float) -> Mesh:
     import manifold3d
 
     man = manifold3d.Manifold(manifold3d.Mesh64(vert_properties=mesh.vertices,
-                                                tri_verts=mesh.faces.astype(np.uint64)))
-    if man.status() != manifold3d.Error.NoError or man.is_empty():
-        return mesh
-    man = man.simplify(tolerance)
-    if man.status() != manifold3d.Error.NoError or man.is_empty():
+                                                tri_verts=mesh.faces.astype(np.uint64))).simplify(tolerance)
+    if man.status() != manifold3d.Error.NoError or man.is_empty():  # an invalid input stays invalid
         return mesh
     m = man.to_mesh64()
     return Mesh(np.asarray(m.vert_properties)[:, :3], np.asarray(m.tri_verts).astype(np.int64))
@@ -67,13 +57,10 @@ def _presimplify(mesh: Mesh, tolerance: float) -> Mesh:
 
 def remesh(mesh: Mesh, target_vertices: int = 5000, *, collapse: float = 0.15,
            iterations: int = 10) -> Mesh:
-    """Isotropic remesh of a closed manifold `mesh` (pymeshlab) so that after `simplify(collapse)`
-    about `target_vertices` vertices remain (the remesh itself has ~target / (1 - collapse)).
-
-    The edge length is estimated from the surface area, then corrected (from the input again) while
-    the vertex count is more than 6% off. The result is checked with closed_manifold_problem; if
-    remeshing breaks it, a more conservative remesh (surface-distance checks on) is tried.
-    """
+    """Isotropic remesh (see the module) with ~target / (1 - collapse) vertices. The edge length is
+    estimated from the surface area, then corrected (from the input again) while the vertex count is
+    more than 6% off; where remeshing breaks the closed manifold, a more conservative remesh
+    (surface-distance checks on) is tried."""
     stage = "remesh"
     problem = closed_manifold_problem(mesh, zero_area_ok=True)
     if problem is not None:
@@ -83,14 +70,12 @@ def remesh(mesh: Mesh, target_vertices: int = 5000, *, collapse: float = 0.15,
     if not 0 <= collapse < 1:
         raise MeshError(stage, f"collapse must be in [0, 1), got {collapse}")
     goal = target_vertices / (1.0 - collapse)
-    area = _area(mesh.vertices, mesh.faces)
+    area = float(face_areas(mesh.vertices, mesh.faces).sum())
     if not area > 0:
         raise MeshError(stage, "zero surface area")
     length = _LENGTH_FACTOR * np.sqrt(2.0 * area / (np.sqrt(3.0) * goal))
 
-    source = mesh
-    if mesh.n_vertices > 4 * goal:
-        source = _presimplify(mesh, 0.05 * length)
+    source = _presimplify(mesh, 0.05 * length) if mesh.n_vertices > 4 * goal else mesh
 
     best, best_err, last_problem = None, np.inf, None
     for checksurfdist in (False, True):
@@ -112,8 +97,7 @@ def remesh(mesh: Mesh, target_vertices: int = 5000, *, collapse: float = 0.15,
             # estimated from the last two tries (secant in log-log), clamped.
             alpha = 2.0
             if len(tried) >= 2 and tried[-1][0] != tried[-2][0]:
-                alpha = -(tried[-1][1] - tried[-2][1]) / (tried[-1][0] - tried[-2][0])
-                alpha = float(np.clip(alpha, 0.7, 3.0))
+                alpha = float(np.clip(-(tried[-1][1] - tried[-2][1]) / (tried[-1][0] - tried[-2][0]), 0.7, 3.0))
             cur = float(np.exp(tried[-1][0] + (tried[-1][1] - np.log(goal)) / alpha))
         if best is not None:
             break
@@ -123,8 +107,7 @@ def remesh(mesh: Mesh, target_vertices: int = 5000, *, collapse: float = 0.15,
 
 
 def simplify(mesh: Mesh, collapse: float = 0.15) -> Mesh:
-    """QEM edge collapse removing the fraction `collapse` of the edges (= of the faces) of a closed
-    manifold; the result is checked and falls back to pymeshlab's topology-preserving collapse."""
+    """QEM edge collapse of the fraction `collapse` of a closed manifold's edges (see the module)."""
     stage = "simplify"
     problem = closed_manifold_problem(mesh)
     if problem is not None:
@@ -150,14 +133,9 @@ def simplify(mesh: Mesh, collapse: float = 0.15) -> Mesh:
     except Exception as exc:  # noqa: BLE001 - native library; any failure means: use the fallback
         problems.append(f"fast-simplification: {type(exc).__name__}")
 
-    import pymeshlab
-
-    ms = pymeshlab.MeshSet()
-    ms.add_mesh(pymeshlab.Mesh(vertex_matrix=mesh.vertices, face_matrix=mesh.faces))
-    ms.meshing_decimation_quadric_edge_collapse(targetfacenum=target_faces, preservetopology=True,
-                                                preservenormal=True, planarquadric=True,
-                                                qualitythr=0.3, autoclean=True)
-    out = remove_degenerate_faces(meshset_mesh(ms))
+    out = remove_degenerate_faces(meshlab_filter(
+        mesh, "meshing_decimation_quadric_edge_collapse", targetfacenum=target_faces, preservetopology=True,
+        preservenormal=True, planarquadric=True, qualitythr=0.3, autoclean=True))
     problem = closed_manifold_problem(out)
     if problem is None:
         return out

@@ -5,7 +5,7 @@ import numpy as np
 
 from geodata.mesh import Mesh, degenerate_faces
 
-__all__ = ["compact", "meshset_mesh", "remove_degenerate_faces"]
+__all__ = ["compact", "meshlab_filter", "remove_degenerate_faces"]
 
 
 def compact(v: np.ndarray, f: np.ndarray) -> Mesh:
@@ -18,8 +18,13 @@ def compact(v: np.ndarray, f: np.ndarray) -> Mesh:
     return Mesh(v[used], remap[f])
 
 
-def meshset_mesh(ms) -> Mesh:
-    """The current mesh of a pymeshlab MeshSet, without unreferenced vertices."""
+def meshlab_filter(mesh: Mesh, name: str, **params) -> Mesh:
+    """`mesh` after the pymeshlab filter `name` (a MeshSet method's name), without unreferenced vertices."""
+    import pymeshlab
+
+    ms = pymeshlab.MeshSet()
+    ms.add_mesh(pymeshlab.Mesh(vertex_matrix=mesh.vertices, face_matrix=mesh.faces))
+    ms.apply_filter(name, **params)
     m = ms.current_mesh()
     return compact(np.asarray(m.vertex_matrix(), dtype=np.float64), np.asarray(m.face_matrix(), dtype=np.int64))
 
@@ -31,9 +36,4 @@ def remove_degenerate_faces(mesh: Mesh) -> Mesh:
     """
     if not degenerate_faces(mesh).any():
         return mesh
-    import pymeshlab
-
-    ms = pymeshlab.MeshSet()
-    ms.add_mesh(pymeshlab.Mesh(vertex_matrix=mesh.vertices, face_matrix=mesh.faces))
-    ms.meshing_remove_t_vertices(method=0, threshold=40, repeat=True)
-    return meshset_mesh(ms)
+    return meshlab_filter(mesh, "meshing_remove_t_vertices", method=0, threshold=40, repeat=True)

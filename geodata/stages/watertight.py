@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from geodata.mesh import Mesh, MeshError, closed_manifold_problem, component_volumes
+from geodata.mesh import Mesh, MeshError, closed_manifold_problem, component_volumes, face_areas
 
 __all__ = ["watertight"]
 
@@ -43,12 +43,9 @@ def _surface_samples(p: np.ndarray, f: np.ndarray, spacing: float) -> np.ndarray
     edge_len = np.linalg.norm(tri[:, [1, 2, 0]] - tri, axis=2)   # edge k: corner k -> k+1
     k = np.argmax(edge_len, axis=1)
     rows = np.arange(len(f))
-    a = tri[rows, k]
-    b = tri[rows, (k + 1) % 3]
-    c = tri[rows, (k + 2) % 3]                                   # apex opposite the longest edge
-    ab = b - a
+    a, b, c = (tri[rows, (k + i) % 3] for i in range(3))          # c: apex opposite the longest edge
     length = edge_len[rows, k]
-    cross = np.linalg.norm(np.cross(ab, c - a), axis=1)
+    cross = np.linalg.norm(np.cross(b - a, c - a), axis=1)
     height = np.where(length > 0, cross / np.maximum(length, 1e-300), 0.0)
     n_u = np.maximum(1, np.ceil(length / spacing)).astype(np.int64)
     n_v = np.maximum(1, np.ceil(height / spacing)).astype(np.int64)
@@ -84,11 +81,9 @@ def _unsigned_distance_band(p: np.ndarray, f: np.ndarray, shape: tuple[int, int,
     # inside it.
     box = ndimage.minimum_filter(marked, size=2 * r + 1, mode="constant", cval=True)
     sub = np.argwhere(~box)
-    lo = sub.min(axis=0)
-    hi = sub.max(axis=0) + 1
+    lo, hi = sub.min(axis=0), sub.max(axis=0) + 1
     crop = marked[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]]
-    edt = ndimage.distance_transform_edt(crop)
-    nodes = np.argwhere(edt <= reach) + lo
+    nodes = np.argwhere(ndimage.distance_transform_edt(crop) <= reach) + lo
     d2, _, _ = igl.point_mesh_squared_distance(nodes.astype(np.float64), p, f)
     d = np.full(shape, far, dtype=np.float64)
     d[nodes[:, 0], nodes[:, 1], nodes[:, 2]] = np.minimum(np.sqrt(np.maximum(d2, 0.0)), far)
@@ -115,9 +110,9 @@ def watertight(mesh: Mesh, *, resolution: int = 128, offset: float = 0.75,
     from scipy import ndimage
     from skimage.measure import marching_cubes
     import manifold3d
+    import trimesh
 
-    v = np.asarray(mesh.vertices, dtype=np.float64)
-    f = np.asarray(mesh.faces, dtype=np.int64)
+    v, f = mesh.vertices, mesh.faces
     if len(f) == 0 or len(v) == 0:
         raise MeshError(_STAGE, "no faces")
     if not np.isfinite(v).all():
@@ -130,13 +125,11 @@ def watertight(mesh: Mesh, *, resolution: int = 128, offset: float = 0.75,
         raise MeshError(_STAGE, f"offset must be positive, got {offset}")
 
     used = np.unique(f)
-    lo = v[used].min(axis=0)
-    hi = v[used].max(axis=0)
+    lo, hi = v[used].min(axis=0), v[used].max(axis=0)
     extent = float((hi - lo).max())
     if not extent > 0:
         raise MeshError(_STAGE, "degenerate bounding box")
-    a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
-    area = float(0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum())
+    area = float(face_areas(v, f).sum())
     h = max(extent / resolution, np.sqrt(area / max_surface_cells))   # cell size in input units
     pad = int(np.ceil(offset)) + 3               # empty layers around the shape
     origin = lo - pad * h
@@ -151,13 +144,9 @@ def watertight(mesh: Mesh, *, resolution: int = 128, offset: float = 0.75,
     # Outside: the part of {d > offset} connected to the grid border.
     free = d > offset
     labels, _ = ndimage.label(free)
-    border = np.unique(np.concatenate([
-        labels[0].ravel(), labels[-1].ravel(), labels[:, 0].ravel(), labels[:, -1].ravel(),
-        labels[:, :, 0].ravel(), labels[:, :, -1].ravel()]))
-    lut = np.zeros(labels.max() + 1, dtype=bool)
-    lut[border] = True
-    lut[0] = False
-    outside = lut[labels]
+    border = np.ones(shape, dtype=bool)
+    border[1:-1, 1:-1, 1:-1] = False
+    outside = free & np.isin(labels, labels[border])
     if outside.all():
         raise MeshError(_STAGE, "no solid found on the grid")
     # Inside nodes (shell and filled cavities) below the level, outside above, each at least `gap`
@@ -200,10 +189,7 @@ def watertight(mesh: Mesh, *, resolution: int = 128, offset: float = 0.75,
         m64 = comp.to_mesh64()
         cv = np.asarray(m64.vert_properties)[:, :3].astype(np.float64)
         cf = np.asarray(m64.tri_verts).astype(np.int64)
-        if len(cf) == 0:
-            continue
-        size = cv.max(axis=0) - cv.min(axis=0)
-        if (size < min_component_cells).all():
+        if len(cf) == 0 or (np.ptp(cv, axis=0) < min_component_cells).all():
             continue
         if comp.volume() <= 0:
             cf = cf[:, ::-1]
@@ -212,12 +198,8 @@ def watertight(mesh: Mesh, *, resolution: int = 128, offset: float = 0.75,
         raise MeshError(_STAGE, "only tiny components")
     # Deterministic order: by the lexicographically smallest vertex of each part.
     parts.sort(key=lambda vf: tuple(vf[0].min(axis=0)))
-    out_v, out_f, base = [], [], 0
-    for cv, cf in parts:
-        out_v.append(cv)
-        out_f.append(cf + base)
-        base += len(cv)
-    out = Mesh(np.concatenate(out_v) * h + origin, np.concatenate(out_f))
+    out_v, out_f = trimesh.util.append_faces([cv for cv, _ in parts], [cf for _, cf in parts])
+    out = Mesh(out_v * h + origin, out_f)
     # Slivers from manifold3d's simplification are left to the remesh stage, which rebuilds the triangles.
     problem = closed_manifold_problem(out, zero_area_ok=True)
     if problem is not None:
