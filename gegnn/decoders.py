@@ -7,7 +7,7 @@ one pass for the landmark decoder on a CPU).
 """
 from __future__ import annotations
 
-import contextlib
+from contextlib import nullcontext
 
 import torch
 from torch import Tensor, nn
@@ -29,24 +29,26 @@ class MLP(nn.Sequential):
         *hidden, last = self
         for layer in hidden:
             x = layer(x)
-        with no_autocast(x.device):
+        device = x.device.type  # one without autocast (e.g. meta) has none to leave
+        with torch.autocast(device, enabled=False) if torch.amp.is_autocast_available(device) else nullcontext():
             return last(x.float())
 
 
-def no_autocast(device: torch.device):
-    """A region where autocast is off (a device type without autocast, e.g. meta, has none to leave)."""
-    if torch.amp.is_autocast_available(device.type):
-        return torch.autocast(device.type, enabled=False)
-    return contextlib.nullcontext()
-
-
-def mlp(n_in: int, hidden: int) -> MLP:
-    """n_in -> hidden -> hidden -> 1 with ReLUs."""
-    return MLP(nn.Linear(n_in, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, 1))
+def mlp(n_in: int, hidden: int, zero_last: bool = False) -> MLP:
+    """n_in -> hidden -> hidden -> 1 with ReLUs; ``zero_last``: the last layer starts at zero."""
+    m = MLP(nn.Linear(n_in, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, 1))
+    if zero_last:
+        nn.init.zeros_(m[-1].weight)
+        nn.init.zeros_(m[-1].bias)
+    return m
 
 
 class PairDecoder(nn.Module):
-    """What every decoder shares: :meth:`pair_inputs`."""
+    """What every decoder shares: :meth:`pair_inputs`, and ``forward`` = ``output(mlp(inputs))``."""
+
+    def forward(self, a: Tensor, b: Tensor) -> Tensor:
+        x, extra = self.inputs(a, b)
+        return self.output(self.mlp(x), extra)
 
     def pair_inputs(self, codes: Tensor, i: Tensor, j: Tensor):
         """``inputs(codes[i], codes[j])`` (index_select, not codes[i]: advanced indexing is a generic
@@ -87,10 +89,9 @@ class DistanceDecoder(PairDecoder):
         return t.squeeze(1).abs()
 
     def forward(self, a: Tensor, b: Tensor) -> Tensor:
-        x, extra = self.inputs(a, b)
         if self.mlp is None:
-            return (x.sum(dim=1) + 1e-12).sqrt()  # eps: finite gradient at a == b
-        return self.output(self.mlp(x), extra)
+            return ((a - b).square().sum(dim=1) + 1e-12).sqrt()  # eps: finite gradient at a == b
+        return super().forward(a, b)
 
 
 class LandmarkDecoder(PairDecoder):
@@ -140,10 +141,7 @@ class LandmarkDecoder(PairDecoder):
         self.embed_dim, self.k = embed_dim, landmarks
         self.embedding, self.euclidean, self.kind = embedding, euclidean, output
         n_in = (embed_dim if embedding else 0) + 5 + (1 if euclidean else 0) + 1
-        self.mlp = mlp(n_in, hidden)
-        if output == "ratio":  # start as the lower bound itself
-            nn.init.zeros_(self.mlp[-1].weight)
-            nn.init.zeros_(self.mlp[-1].bias)
+        self.mlp = mlp(n_in, hidden, zero_last=output == "ratio")  # ratio: start as the lower bound itself
 
     @staticmethod
     def codes(embeddings: Tensor, fields: Tensor, positions: Tensor) -> Tensor:
@@ -165,8 +163,7 @@ class LandmarkDecoder(PairDecoder):
             feats.append((a[:, d + k + 1:] - b[:, d + k + 1:]).norm(dim=1))
         parts = [torch.stack(feats, dim=1).div_(u.unsqueeze(1)), u.log().unsqueeze(1)]
         if self.embedding:
-            ea, eb = a[:, :d], b[:, :d]
-            parts.insert(0, (ea - eb).square())
+            parts.insert(0, (a[:, :d] - b[:, :d]).square())
         return torch.cat(parts, dim=1), (lower, upper)
 
     def pair_inputs(self, codes: Tensor, i: Tensor, j: Tensor):
@@ -204,10 +201,6 @@ class LandmarkDecoder(PairDecoder):
             d = lower + (upper - lower).clamp_min(0) * torch.sigmoid(t)
         return torch.where(lower > 0, d, torch.zeros_like(d))
 
-    def forward(self, a: Tensor, b: Tensor) -> Tensor:
-        x, extra = self.inputs(a, b)
-        return self.output(self.mlp(x), extra)
-
 
 class SpectralDecoder(PairDecoder):
     r"""Biharmonic distance from truncated spectral codes, their Weyl-law tail and the embeddings
@@ -241,9 +234,7 @@ class SpectralDecoder(PairDecoder):
     def __init__(self, embed_dim: int, modes: int, hidden: int, embedding: bool = True):
         super().__init__()
         self.embed_dim, self.m, self.embedding = embed_dim, modes, embedding
-        self.mlp = mlp((embed_dim if embedding else 0) + 3, hidden)
-        nn.init.zeros_(self.mlp[-1].weight)
-        nn.init.zeros_(self.mlp[-1].bias)
+        self.mlp = mlp((embed_dim if embedding else 0) + 3, hidden, zero_last=True)
         self.register_buffer("weyl", weyl_table(), persistent=False)
 
     @staticmethod
@@ -270,7 +261,3 @@ class SpectralDecoder(PairDecoder):
     def output(self, t: Tensor, extra: tuple[Tensor, Tensor]) -> Tensor:
         bound, tail = extra
         return (bound + tail * t.squeeze(1).float().clamp(max=MAX_LOG_RATIO).exp()).sqrt()
-
-    def forward(self, a: Tensor, b: Tensor) -> Tensor:
-        x, extra = self.inputs(a, b)
-        return self.output(self.mlp(x), extra)

@@ -44,6 +44,11 @@ def setup_distributed(device: torch.device) -> Dist:
     return Dist(dist.get_rank(), dist.get_world_size())
 
 
+def barrier(ctx: Dist) -> None:
+    if ctx.world > 1:
+        dist.barrier()
+
+
 def all_sum(values: list[float], ctx: Dist, device) -> list[float]:
     if ctx.world == 1:
         return values

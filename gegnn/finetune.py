@@ -58,11 +58,11 @@ def split_sources(part: np.ndarray, n_train: int, n_held_out: int, seed: int = 0
     return pick[:n_train], pick[n_train:]
 
 
-def _pairs(sources: np.ndarray, fields: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
+def _pairs(sources: np.ndarray, fields: np.ndarray, device) -> tuple[torch.Tensor, torch.Tensor]:
     """(P, 2) pairs (source, vertex) and their distances, over the finite entries of ``fields`` (S, N)."""
     s_idx, v_idx = np.nonzero(np.isfinite(fields) & (fields > 0))
-    pairs = np.stack([sources[s_idx], v_idx], axis=1)
-    return torch.as_tensor(pairs), torch.as_tensor(fields[s_idx, v_idx], dtype=torch.float32)
+    pairs = torch.as_tensor(np.stack([sources[s_idx], v_idx], axis=1), device=device)
+    return pairs, torch.as_tensor(fields[s_idx, v_idx], dtype=torch.float32, device=device)
 
 
 def finetune(model, vertices, faces, sources: int = 64, held_out: int = 8, steps: int = 0,
@@ -81,12 +81,11 @@ def finetune(model, vertices, faces, sources: int = 64, held_out: int = 8, steps
     device = next(model.parameters()).device
     hierarchy, lm_fields, scale = model.inputs(vertices, faces, device)
     h, lm_fields = hierarchy(), lm_fields()
-    mesh = Mesh(np.asarray(vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64))
+    mesh = Mesh(vertices, faces)  # float64 and int64 arrays
     train_src, held_src = split_sources(largest_part(mesh), sources, held_out, seed)
     exact = exact_fields(mesh, np.concatenate([train_src, held_src]), model.config.distance) / scale  # normalized
-    train_pairs, train_d = _pairs(train_src, exact[:sources])
-    held_pairs, held_d = _pairs(held_src, exact[sources:])
-    train_pairs, train_d, held_pairs, held_d = (t.to(device) for t in (train_pairs, train_d, held_pairs, held_d))
+    train_pairs, train_d = _pairs(train_src, exact[:sources], device)
+    held_pairs, held_d = _pairs(held_src, exact[sources:], device)
     t1 = time.perf_counter()
     model.eval()
     with torch.no_grad():

@@ -13,9 +13,8 @@ from .distributed import Dist, average_gradients
 def show_loss(bar, losses: list[torch.Tensor]) -> None:
     """Show the loss of the step before the last: the device is busy with the last one meanwhile, so
     reading it does not drain the queue of launched kernels."""
-    if bar.disable:
-        return
-    bar.set_postfix(mre=f"{losses[-2 if len(losses) > 1 else -1].item():.4f}")
+    if not bar.disable:
+        bar.set_postfix(mre=f"{losses[-2 if len(losses) > 1 else -1].item():.4f}")
 
 
 def fit_pairs(params, loss_fn, n_pairs: int, steps: int, lr: float, pairs_per_step: int,
@@ -23,8 +22,7 @@ def fit_pairs(params, loss_fn, n_pairs: int, steps: int, lr: float, pairs_per_st
     """``steps`` AdamW steps (no weight decay) on ``params``, each on the loss ``loss_fn(indices)`` of
     ``pairs_per_step`` random indices into ``n_pairs`` pairs, drawn on the ``generator``'s device, the
     learning rate decaying linearly from ``lr`` to 0. With ``ctx`` of several processes the gradients are
-    averaged across them (each process its own pairs). Returns the losses. The loop of the decoder
-    warm-up and of finetuning."""
+    averaged across them (each process its own pairs). Returns the losses."""
     params = list(params)
     optimizer = torch.optim.AdamW(params, lr=lr, weight_decay=0.0)
     losses = []

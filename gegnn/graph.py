@@ -12,11 +12,35 @@ import numpy as np
 import torch
 from torch import Tensor
 
-__all__ = ["Graph", "directed_edges", "disjoint_union", "random_rotation"]
+__all__ = ["Graph", "Tensors", "directed_edges", "disjoint_union", "mesh_graph", "random_rotation"]
+
+
+class Tensors:
+    """A dataclass of tensors, lists of them and such dataclasses (other values are kept as they are):
+    ``apply(fn)`` maps every tensor; ``to`` and ``pin_memory`` (a page-locked copy, so that ``to(cuda)`` is
+    an asynchronous copy: the DataLoader's ``pin_memory`` calls it in its pinning thread) through it."""
+
+    def apply(self, fn: Callable[[Tensor], Tensor]):
+        """A copy with ``fn`` applied to every tensor."""
+        return type(self)(*(_apply(fn, getattr(self, f.name)) for f in fields(self)))
+
+    def to(self, device):
+        return self.apply(partial(Tensor.to, device=device, non_blocking=True))
+
+    def pin_memory(self):
+        return self.apply(Tensor.pin_memory)
+
+
+def _apply(fn: Callable[[Tensor], Tensor], value):
+    if isinstance(value, Tensor):
+        return fn(value)
+    if isinstance(value, Tensors):
+        return value.apply(fn)
+    return [_apply(fn, v) for v in value] if isinstance(value, list) else value
 
 
 @dataclass
-class Graph:
+class Graph(Tensors):
     """One level of a (batched) mesh graph.
 
     Attributes:
@@ -36,15 +60,13 @@ class Graph:
     def num_nodes(self) -> int:
         return self.pos.shape[0]
 
-    def apply(self, fn: Callable[[Tensor], Tensor]) -> "Graph":
-        """The graph with ``fn`` applied to every tensor."""
-        return Graph(*(fn(getattr(self, f.name)) for f in fields(self)))
 
-    def to(self, device) -> "Graph":
-        return self.apply(partial(Tensor.to, device=device, non_blocking=True))
-
-    def pin_memory(self) -> "Graph":
-        return self.apply(Tensor.pin_memory)
+def mesh_graph(vertices, normals, edges) -> Graph:
+    """A single mesh (normalized vertices, unit normals, undirected edges (E, 2)) as a Graph."""
+    pos = torch.as_tensor(np.asarray(vertices, dtype=np.float32))
+    return Graph(pos=pos, normal=torch.as_tensor(np.asarray(normals, dtype=np.float32)),
+                 edge_index=directed_edges(torch.as_tensor(np.asarray(edges, dtype=np.int64))),
+                 batch=torch.zeros(len(pos), dtype=torch.long))
 
 
 def directed_edges(edges: Tensor) -> Tensor:

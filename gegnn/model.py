@@ -13,12 +13,14 @@ from torch import Tensor, nn
 from geodata.mesh import Mesh, unique_edges, vertex_normals
 from geodata.stages.normalize import normalization
 
+from .checkpoint import load_checkpoint, save_checkpoint
 from .config import GeGnnConfig
 from .decoders import DistanceDecoder, LandmarkDecoder, SpectralDecoder
 from .fields.cache import FieldSpec
-from .graph import Graph, directed_edges
+from .graph import Graph, mesh_graph
 from .nn import GeoConv, GeoPool, GeoUnpool, Hierarchy, ResBlocks, build_hierarchy
 from .precision import resolve
+from .queries.embedding import Embedding
 from .threads import beside, fewer_for_torch
 
 __all__ = ["GeGnnConfig", "GeGnn", "DistanceDecoder", "LandmarkDecoder", "SpectralDecoder"]
@@ -66,13 +68,7 @@ class GeGnn(nn.Module):
             self.distance = DistanceDecoder(config.embed_dim, config.decoder_hidden, config.decoder)
 
     # -- graphs -------------------------------------------------------------------------------------
-    @staticmethod
-    def mesh_graph(vertices, normals, edges) -> Graph:
-        """A single mesh (normalized vertices, unit normals, undirected edges) as a Graph."""
-        pos = torch.as_tensor(np.asarray(vertices, dtype=np.float32))
-        return Graph(pos=pos, normal=torch.as_tensor(np.asarray(normals, dtype=np.float32)),
-                     edge_index=directed_edges(torch.as_tensor(np.asarray(edges, dtype=np.int64))),
-                     batch=torch.zeros(len(pos), dtype=torch.long))
+    mesh_graph = staticmethod(mesh_graph)
 
     def hierarchy(self, graph: Graph) -> Hierarchy:
         """The GeoPool hierarchy this network's config asks for."""
@@ -82,8 +78,9 @@ class GeGnn(nn.Module):
     def forward(self, h: Hierarchy, pairs: Tensor | None = None, fields: Tensor | None = None) -> Tensor:
         """Vertex codes of the level-0 vertices of ``h``: the embeddings (N, embed_dim), or with
         landmarks or spectral modes the decoder's codes ``[e | fields | pos]`` (``fields``: (N, K) landmark
-        distances or (N, m + 1) spectral codes, in normalized units). With ``pairs`` (P, 2) indexing those vertices, the decoded distances (P,)
-        instead (one call, so DistributedDataParallel sees the decoder's parameters used inside forward)."""
+        distances or (N, m + 1) spectral codes, in normalized units). With ``pairs`` (P, 2) indexing those
+        vertices, the decoded distances (P,) instead (one call, so DistributedDataParallel sees the
+        decoder's parameters used inside forward)."""
         z = self.codes(self._unet(h), h, fields)
         if pairs is None:
             return z
@@ -149,8 +146,6 @@ class GeGnn(nn.Module):
             return self._embed(vertices, faces, precision, normals)
 
     def _embed(self, vertices, faces, precision, normals):
-        from .queries.embedding import Embedding
-
         device = next(self.parameters()).device
         if self.config.points:
             if faces is not None:
@@ -196,7 +191,7 @@ class GeGnn(nn.Module):
         spec = FieldSpec.of(self.config)
 
         def hierarchy():
-            graph = self.mesh_graph(mesh.vertices, vertex_normals(mesh).astype(np.float32), unique_edges(mesh.faces))
+            graph = self.mesh_graph(mesh.vertices, vertex_normals(mesh), unique_edges(mesh.faces))
             return self.hierarchy(graph).to(device)
 
         def fields():
@@ -233,7 +228,7 @@ class GeGnn(nn.Module):
         solver = None if spec is None else cloud_landmark_solver(g.points, g.part, normals=normals)
 
         def hierarchy():
-            return self.hierarchy(self.mesh_graph(g.points, g.normals.astype(np.float32), g.edges)).to(device)
+            return self.hierarchy(self.mesh_graph(g.points, g.normals, g.edges)).to(device)
 
         def fields():
             return None if spec is None else torch.as_tensor(solver(spec.size).distances, device=device)
@@ -249,7 +244,6 @@ class GeGnn(nn.Module):
     # -- checkpoints ------------------------------------------------------------------------------------
     def save(self, path, metadata: dict | None = None) -> None:
         """Single-file safetensors checkpoint: weights plus the config (JSON) in the metadata."""
-        from .checkpoint import save_checkpoint
         save_checkpoint(path, self, metadata=metadata)
 
     @classmethod
@@ -269,7 +263,6 @@ class GeGnn(nn.Module):
     def from_checkpoint(cls, path, map_location="cpu") -> "GeGnn":
         """Rebuild the network from a checkpoint file alone (config from its metadata), on the device
         ``map_location``."""
-        from .checkpoint import load_checkpoint
         ckpt = load_checkpoint(path)
         model = cls(ckpt.config)
         model.load_state_dict(ckpt.model_state)  # fp16 weights are cast to the model's fp32

@@ -53,8 +53,7 @@ class ResBlocks(nn.Module):
     def __init__(self, in_channels: int, out_channels: int, num_blocks: int, groups: int = 4,
                  **conv_kwargs):
         super().__init__()
-        widths = [in_channels] + [out_channels] * num_blocks
-        self.blocks = nn.ModuleList(ResBlock(widths[k], widths[k + 1], groups, **conv_kwargs)
+        self.blocks = nn.ModuleList(ResBlock(out_channels if k else in_channels, out_channels, groups, **conv_kwargs)
                                     for k in range(num_blocks))
 
     def forward(self, x: Tensor, pos: Tensor, edge_index: Tensor) -> Tensor:

@@ -2,14 +2,12 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass
-from functools import partial
 
 import torch
 from torch import Tensor, nn
 
-from ..graph import Graph
+from ..graph import Graph, Tensors
 from .scatter import scatter_mean
 
 __all__ = ["geo_clusters", "pool_graph", "pool_features", "unpool_features", "Hierarchy",
@@ -65,7 +63,7 @@ def pool_graph(graph: Graph, cluster: Tensor, num_clusters: int) -> Graph:
 
 
 @dataclass
-class Hierarchy:
+class Hierarchy(Tensors):
     """The graphs of all levels (``graphs[0]`` is the input mesh graph) and the cluster maps between them
     (``clusters[k]`` maps level-k vertices to level-(k+1) vertices)."""
 
@@ -76,23 +74,13 @@ class Hierarchy:
     def depth(self) -> int:
         return len(self.clusters)
 
-    def apply(self, fn: Callable[[Tensor], Tensor]) -> "Hierarchy":
-        """The hierarchy with ``fn`` applied to every tensor."""
-        return Hierarchy([g.apply(fn) for g in self.graphs], [fn(c) for c in self.clusters])
-
-    def to(self, device) -> "Hierarchy":
-        return self.apply(partial(Tensor.to, device=device, non_blocking=True))
-
-    def pin_memory(self) -> "Hierarchy":
-        """Page-locked copy, so that ``to(cuda)`` is an asynchronous copy (the DataLoader's ``pin_memory``
-        calls this in its pinning thread)."""
-        return self.apply(Tensor.pin_memory)
-
 
 def build_hierarchy(graph: Graph, levels: int, sigma_c: float = 1 / 16,
                     sigma_n: float = 3 / 16) -> Hierarchy:
     """Pool ``levels`` times, doubling both cell sizes at each level (the paper's schedule)."""
-    graph = Graph(graph.pos, graph.normal, _sorted_edges(graph.edge_index), graph.batch)
+    # Edges grouped by receiving vertex keep the scatter in GeoConv cache-friendly.
+    order = torch.argsort(graph.edge_index[0], stable=True)
+    graph = Graph(graph.pos, graph.normal, graph.edge_index[:, order], graph.batch)
     graphs, clusters = [graph], []
     for level in range(levels):
         scale = 2.0 ** level
@@ -101,11 +89,6 @@ def build_hierarchy(graph: Graph, levels: int, sigma_c: float = 1 / 16,
         graphs.append(graph)
         clusters.append(cluster)
     return Hierarchy(graphs, clusters)
-
-
-def _sorted_edges(edge_index: Tensor) -> Tensor:
-    # Edges grouped by receiving vertex keep the scatter in GeoConv cache-friendly.
-    return edge_index[:, torch.argsort(edge_index[0], stable=True)]
 
 
 class GeoPool(nn.Module):

@@ -229,8 +229,7 @@ def shade_field(vertices, faces, field, view: View, *, size=512, cmap="viridis",
     if field.ndim == 2:  # (u, v) per vertex: a checkerboard texture, interpolated per pixel
         uv = (field[faces[f]] * bary[..., None]).sum(axis=2)
         unreachable = covered & np.isnan(uv).any(axis=2)
-        rgba = checkerboard(np.nan_to_num(uv), vmax)
-        rgba = _paint(rgba, np.zeros(uv.shape[:2]), covered, unreachable, light, 0)
+        rgba = _paint(checkerboard(np.nan_to_num(uv), vmax), np.zeros(uv.shape[:2]), covered, unreachable, light, 0)
     else:
         value = (field[faces[f]] * bary).sum(axis=2)
         rgba = _paint_values(value, covered, light, field, cmap, vmin, vmax, isolines)
@@ -275,10 +274,7 @@ def shade_points(points, field, view: View, *, normals=None, size=512, cmap="vir
     point_img = point_img.reshape(size, size)
     covered = point_img >= 0
     p = np.where(covered, point_img, 0)
-    if normals is None:
-        light = np.ones((size, size))
-    else:
-        light = 0.45 + 0.55 * np.abs((normals @ view.rotation.T)[:, 2])[p]
+    light = np.ones((size, size)) if normals is None else 0.45 + 0.55 * np.abs((normals @ view.rotation.T)[:, 2])[p]
     rgba = _paint_values(field[p], covered, light, field, cmap, vmin, vmax, isolines)
     if marker is not None:
         x, y = np.clip(np.floor(xy[marker]), 0, size - 1).astype(int)

@@ -51,11 +51,6 @@ def decoder_spec(decoder) -> dict:
     raise TypeError(f"no page decoder for {type(decoder).__name__}")
 
 
-def _colormap(name: str) -> dict:
-    import matplotlib
-    return _blob(matplotlib.colormaps[name](np.linspace(0, 1, 256))[:, :3], "float32")
-
-
 def view_page(emb, *, title: str, meta: str = "", sources=(0,), exact: dict | None = None,
               file_index: np.ndarray | None = None, up: str | None = None, dtype: str = "float32",
               normals: np.ndarray | None = None) -> str:
@@ -75,6 +70,8 @@ def view_page(emb, *, title: str, meta: str = "", sources=(0,), exact: dict | No
         normals: a cloud's normals (N, 3), for the light only (either sign); estimated where None (the
             least-variance direction of each point's 8 nearest).
     """
+    import matplotlib
+
     vertices, faces = emb.vertices, emb.faces
     cloud = faces is None and emb.part is not None
     if vertices is None or (faces is None and not cloud):
@@ -106,7 +103,8 @@ def view_page(emb, *, title: str, meta: str = "", sources=(0,), exact: dict | No
         "camera": {"up": u.tolist(), "horizontal": (horizontal / np.linalg.norm(horizontal)).tolist(),
                    "elevation": float(np.arcsin(np.clip(toward @ u, -1, 1))),
                    "center": ((vertices.min(axis=0) + vertices.max(axis=0)) / 2).tolist()},
-        "luts": {"viridis": _colormap("viridis"), "magma": _colormap("magma")},
+        "luts": {name: _blob(matplotlib.colormaps[name](np.linspace(0, 1, 256))[:, :3], "float32")
+                 for name in ("viridis", "magma")},
     }
     assets = files("gegnn.pictures") / "assets"
     return Template((assets / "viewer.html").read_text(encoding="utf-8")).substitute(

@@ -7,16 +7,15 @@ from __future__ import annotations
 
 import hashlib
 from collections import OrderedDict
-from collections.abc import Callable
 from dataclasses import dataclass
-from functools import cached_property, partial
+from functools import cached_property
 
 import numpy as np
 import torch
 from torch import Tensor
 
 from ..fields.cache import FieldCache, FieldSpec, geometry_key
-from ..graph import Graph, directed_edges, disjoint_union, random_rotation
+from ..graph import Graph, Tensors, disjoint_union, mesh_graph, random_rotation
 from ..nn.geopool import Hierarchy, build_hierarchy
 
 __all__ = ["GeodesicStore", "MeshGeometry", "Batch", "split_meshes", "epoch_batches", "sample_mesh",
@@ -57,9 +56,8 @@ class GeodesicStore:
         self.root = zarr.open_group(self.path, mode="r")
         if self.root.attrs.get("geodata_format") != 1:
             raise ValueError(f"{path}: not a geodata store (attribute geodata_format != 1)")
-        meshes = self.root["meshes"] if "meshes" in self.root else None
-        self.mesh_ids = sorted(k for k, g in (meshes.groups() if meshes is not None else [])
-                               if self._committed(g))
+        meshes = self.root["meshes"].groups() if "meshes" in self.root else []
+        self.mesh_ids = sorted(k for k, g in meshes if self._committed(g))
 
     def _committed(self, group) -> bool:
         if group.attrs.get("status") != "ok":
@@ -120,7 +118,7 @@ class Sample:
 
 
 @dataclass
-class Batch:
+class Batch(Tensors):
     """A disjoint union of meshes with its GeoPool hierarchy and sampled pairs (global indices)."""
 
     hierarchy: Hierarchy
@@ -128,19 +126,6 @@ class Batch:
     distances: Tensor
     mesh_ids: tuple[str, ...]
     fields: Tensor | None = None
-
-    def apply(self, fn: Callable[[Tensor], Tensor]) -> "Batch":
-        """The batch with ``fn`` applied to every tensor."""
-        return Batch(self.hierarchy.apply(fn), fn(self.pairs), fn(self.distances), self.mesh_ids,
-                     None if self.fields is None else fn(self.fields))
-
-    def to(self, device) -> "Batch":
-        return self.apply(partial(Tensor.to, device=device, non_blocking=True))
-
-    def pin_memory(self) -> "Batch":
-        """Page-locked copy, so that ``to(cuda)`` is an asynchronous copy (the DataLoader's ``pin_memory``
-        calls this in its pinning thread)."""
-        return self.apply(Tensor.pin_memory)
 
 
 def sample_mesh(geometry: MeshGeometry, pairs: np.ndarray, distances: np.ndarray,
@@ -156,10 +141,7 @@ def sample_mesh(geometry: MeshGeometry, pairs: np.ndarray, distances: np.ndarray
     if num_pairs is not None and num_pairs < len(pairs):
         keep = rng.choice(len(pairs), num_pairs, replace=False)
         pairs, distances = pairs[keep], distances[keep]
-    graph = Graph(pos=torch.from_numpy(np.ascontiguousarray(v)), normal=torch.from_numpy(np.ascontiguousarray(n)),
-                  edge_index=directed_edges(torch.from_numpy(geometry.edges)),
-                  batch=torch.zeros(len(v), dtype=torch.long))
-    return Sample(graph, torch.from_numpy(pairs), torch.from_numpy(distances),
+    return Sample(mesh_graph(v, n, geometry.edges), torch.from_numpy(pairs), torch.from_numpy(distances),
                   None if fields is None else torch.from_numpy(fields))
 
 
@@ -214,19 +196,15 @@ class BatchDataset(torch.utils.data.Dataset):
         rng = np.random.default_rng([self.seed, epoch + 1, mesh_hash(mesh_id)])  # epoch -1 -> 0 is val
         pairs, distances = self.store.pairs(mesh_id)
         fields = None
-        if self.fields is not None:
-            fields = self.mesh_fields(mesh_id, self.field_seed(epoch, rng))
+        if self.fields is not None:  # the draw: seed 0 for validation, else one of fields.draws
+            fields = self.mesh_fields(mesh_id, 0 if epoch == VAL_EPOCH else int(rng.integers(self.fields.draws)))
         return sample_mesh(self.geometry(mesh_id), pairs, distances, rng, self.num_pairs,
                            self.rotate and epoch != VAL_EPOCH, fields)
 
-    def field_seed(self, epoch: int, rng: np.random.Generator) -> int:
-        """The field draw of a sample: seed 0 for validation, else one of ``fields.draws``."""
-        return 0 if epoch == VAL_EPOCH else int(rng.integers(self.fields.draws))
-
     def geometry(self, mesh_id: str) -> MeshGeometry:
-        """The mesh's geometry as the model reads it (:meth:`as_input`), the last GEOMETRY_CACHE meshes kept (~200 kB per 5k-vertex mesh: the
-        validation meshes, seen every epoch, and small stores stay; a worker's memory stays bounded on a
-        large one). Pairs (~7 MB a mesh) are read per use."""
+        """The mesh's geometry as the model reads it (:meth:`as_input`), the last GEOMETRY_CACHE meshes kept
+        (~200 kB per 5k-vertex mesh: the validation meshes, seen every epoch, and small stores stay; a
+        worker's memory stays bounded on a large one). Pairs (~7 MB a mesh) are read per use."""
         if mesh_id in self._geometries:
             self._geometries.move_to_end(mesh_id)
         else:

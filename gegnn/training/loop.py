@@ -23,7 +23,7 @@ from geodata.progress import progress_bar
 
 from ..checkpoint import load_checkpoint, save_checkpoint
 from ..config import GeGnnConfig
-from ..distributed import Dist, all_sum, setup_distributed
+from ..distributed import Dist, all_sum, barrier, setup_distributed
 from ..fields.cache import FieldCache, FieldSpec
 from ..fitting import show_loss
 from ..metrics import pair_errors, relative_error
@@ -76,16 +76,12 @@ def lr_at(step: int, total: int, base: float, warmup: int) -> float:
 
 
 # -- one step, one epoch ---------------------------------------------------------------------------
-def autocast(device: torch.device):
-    """bf16 autocast on a GPU (the network; decoders keep their output layer in fp32), none on a CPU."""
-    return torch.autocast("cuda", dtype=torch.bfloat16, enabled=device.type == "cuda")
-
-
 def train_step(model, batch, optimizer, lr: float, clip_grad: float, device) -> torch.Tensor:
     """One optimizer step; returns the loss as a device tensor (reading it would wait for the device)."""
     for group in optimizer.param_groups:
         group["lr"] = lr
-    with autocast(device):
+    # bf16 autocast on a GPU (the network; decoders keep their output layer in fp32), none on a CPU
+    with torch.autocast("cuda", dtype=torch.bfloat16, enabled=device.type == "cuda"):
         pred = model(batch.hierarchy, batch.pairs, batch.fields)
     loss = relative_error(pred, batch.distances).mean()
     optimizer.zero_grad(set_to_none=True)
@@ -227,8 +223,7 @@ def _train(cfg: TrainConfig, model_config, resume, run: Path, device, ctx: Dist,
            loaders: contextlib.ExitStack) -> list[dict]:
     if ctx.main:
         run.mkdir(parents=True, exist_ok=True)
-    if ctx.world > 1:
-        dist.barrier()
+    barrier(ctx)
     log = run_logger(run, ctx.main)
 
     torch.manual_seed(cfg.seed)
@@ -352,7 +347,7 @@ def load_matching(model, state: dict) -> list[str]:
     return [k for k in own if k not in matching]
 
 
-def save_run(run: Path, model, optimizer, cfg, epoch, step, best, rows, improved, plot=True) -> None:
+def save_run(run: Path, model, optimizer, cfg, epoch, step, best, rows, improved, plot: bool) -> None:
     meta = {"trainer": {"epoch": epoch, "step": step, "best": best},
             "train_config": dataclasses.asdict(cfg), "metrics": rows[-1]}
     if improved:
@@ -371,8 +366,8 @@ def make_loader(dataset, sampler, workers: int, device, persistent: bool = True)
     # Workers are spawned, not forked: zarr v3 runs an asyncio thread that a fork would copy mid-state.
     extra = dict(multiprocessing_context="spawn", persistent_workers=persistent, prefetch_factor=2) \
         if workers else {}
-    return torch.utils.data.DataLoader(dataset, sampler=sampler, batch_size=None, collate_fn=_identity,
-                                       num_workers=workers, pin_memory=device.type == "cuda", **extra)
+    return torch.utils.data.DataLoader(dataset, sampler=sampler, batch_size=None, num_workers=workers,
+                                       pin_memory=device.type == "cuda", **extra)
 
 
 def close_loader(loader) -> None:
@@ -398,8 +393,7 @@ def fill_field_cache(path: str, spec: FieldSpec, work: list[tuple], ctx: Dist, d
     cache = FieldCache(path, spec)
     if ctx.main:
         cache.create()  # once, before the ranks write into it
-    if ctx.world > 1:
-        dist.barrier()
+    barrier(ctx)
     todo, seen = [], set()
     for dataset, mesh_ids, seeds in work:
         for m in mesh_ids:
@@ -414,14 +408,8 @@ def fill_field_cache(path: str, spec: FieldSpec, work: list[tuple], ctx: Dist, d
                 todo += [(key, g.vertices, g.faces, s) for s in lacking]
     t0 = time.perf_counter()
     cache.fill(todo, jobs=cpus_per_process(), progress=ctx.main)
-    total = all_sum([len(todo)], ctx, device)[0]
-    if ctx.world > 1:
-        dist.barrier()
+    total = all_sum([len(todo)], ctx, device)[0]  # a collective: the ranks meet here
     log.info(f"{spec.kind} fields: {int(total)} computed in {time.perf_counter() - t0:.1f} s, cached in {path}")
-
-
-def _identity(batch):
-    return batch
 
 
 # -- evaluation (the paper's protocol: all stored pairs) ------------------------------------------------
