@@ -138,7 +138,8 @@ nb::tuple cone_neighbors(const Points& points, const Rows& centers, const Index&
     const bool given = normals.shape(0) > 0;
     if (given && (normals.shape(0) != points.shape(0) || normals.shape(1) != 3))
         throw std::invalid_argument("cone_neighbors: normals must have the points' shape");
-    if (k < 1 || k > m || fit < 1 || fit > m) throw std::invalid_argument("cone_neighbors: need 1 <= k, fit <= candidates");
+    if (k < 1 || k > m || fit < 1 || fit > m)
+        throw std::invalid_argument("cone_neighbors: need 1 <= k, fit <= candidates");
     const double* x = points.data();
     auto* out = new int64_t[static_cast<size_t>(rows * k)];
     auto* settled = new bool[static_cast<size_t>(rows)];

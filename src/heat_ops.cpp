@@ -85,22 +85,19 @@ public:
         const int n = static_cast<int>(a.rows);
         Eigen::SparseMatrix<double> m(n, n);  // a symmetric matrix: its CSR arrays are its CSC arrays
         m.resizeNonZeros(static_cast<Eigen::Index>(a.data.size()));
-        for (int i = 0; i <= n; ++i) m.outerIndexPtr()[i] = static_cast<int>(a.indptr[i]);
-        for (size_t e = 0; e < a.data.size(); ++e) {
-            m.innerIndexPtr()[e] = static_cast<int>(a.indices[e]);
-            m.valuePtr()[e] = a.data[e];
-        }
+        std::copy(a.indptr.begin(), a.indptr.end(), m.outerIndexPtr());  // int64 to Eigen's int
+        std::copy(a.indices.begin(), a.indices.end(), m.innerIndexPtr());
+        std::copy(a.data.begin(), a.data.end(), m.valuePtr());
         Eigen::SimplicialLLT<Eigen::SparseMatrix<double>, Eigen::Lower, Eigen::AMDOrdering<int>> llt(m);
         if (llt.info() != Eigen::Success) throw std::runtime_error("not positive definite");
         const Eigen::SparseMatrix<double>& l = llt.matrixL().nestedExpression();
         n_ = n;
-        for (int i = 0; i <= n; ++i) colptr_.push_back(l.outerIndexPtr()[i]);
+        colptr_.assign(l.outerIndexPtr(), l.outerIndexPtr() + n + 1);
         row_.assign(l.innerIndexPtr(), l.innerIndexPtr() + l.nonZeros());
         value_.assign(l.valuePtr(), l.valuePtr() + l.nonZeros());
-        for (int j = 0; j < n; ++j) {  // the diagonal entry of every column (Eigen stores it first)
+        for (int j = 0; j < n; ++j)  // the diagonal entry of every column (Eigen stores it first)
             if (colptr_[j] == colptr_[j + 1] || row_[colptr_[j]] != j)
                 throw std::runtime_error("factor without its diagonal");
-        }
         perm_.assign(llt.permutationP().indices().data(), llt.permutationP().indices().data() + n);
     }
 
@@ -269,10 +266,7 @@ private:
 NB_MODULE(_heat_ops, m) {
     nb::class_<HeatFields>(m, "HeatFields")
         .def(nb::init<const Index&, const Index&, const Values&, const Index&, const Index&, const Values&,
-                      const Index&, const Index&, const Values&, const Index&, const Index&, const Values&, int64_t>(),
-             nb::arg("h_indptr"), nb::arg("h_indices"), nb::arg("h_data"), nb::arg("p_indptr"), nb::arg("p_indices"),
-             nb::arg("p_data"), nb::arg("g_indptr"), nb::arg("g_indices"), nb::arg("g_data"), nb::arg("d_indptr"),
-             nb::arg("d_indices"), nb::arg("d_data"), nb::arg("n"))
+                      const Index&, const Index&, const Values&, const Index&, const Index&, const Values&, int64_t>())
         .def("divergence", &HeatFields::divergence, nb::arg("u"))
         .def("distances", &HeatFields::distances, nb::arg("sources"), nb::arg("threads"));
 }

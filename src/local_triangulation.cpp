@@ -114,8 +114,6 @@ void local_triangles(int64_t point, const int64_t* neighbors, int64_t k, Scratch
         y[j] = py[order[j]];
         sq[j] = x[j] * x[j] + y[j] * y[j];
         len[j] = std::sqrt(sq[j]);
-    }
-    for (int64_t j = 0; j < k; ++j) {
         valid[j] = 1;
         prv[j] = (j + k - 1) % k;
         nxt[j] = (j + 1) % k;
@@ -164,7 +162,8 @@ nb::tuple local_triangulations(const Points& points, const Rows& centers, const 
     for (size_t e = 0; e < centers.size(); ++e)
         if (centers.data()[e] < 0 || centers.data()[e] >= n) throw std::out_of_range("local_triangulations: center");
     for (size_t e = 0; e < neighbors.size(); ++e)
-        if (neighbors.data()[e] < 0 || neighbors.data()[e] >= n) throw std::out_of_range("local_triangulations: neighbour");
+        if (neighbors.data()[e] < 0 || neighbors.data()[e] >= n)
+            throw std::out_of_range("local_triangulations: neighbour");
     const double* p = points.data();
     auto* normals = new double[static_cast<size_t>(3 * rows)];
     auto* faces = new std::vector<int64_t>();

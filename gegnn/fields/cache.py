@@ -154,7 +154,8 @@ class FieldCache:
         with ``jobs`` 1 the fields are computed here, on this process's threads."""
         from geodata.progress import progress_bar
 
-        bar = progress_bar(total=len(todo), desc=f"{self.spec.kind} fields", leave=False, disable=not progress, dynamic_ncols=True)
+        bar = progress_bar(total=len(todo), desc=f"{self.spec.kind} fields", leave=False, disable=not progress,
+                           dynamic_ncols=True)
         meshes = {}  # the draws of one mesh in one task: its heat method set up once
         for key, vertices, faces, seed in todo:
             meshes.setdefault(key, (key, vertices, faces, []))[3].append(seed)

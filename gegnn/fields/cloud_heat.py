@@ -59,16 +59,6 @@ __all__ = ["CloudHeatDistance", "local_triangulations", "K_NEIGHBORS"]
 K_NEIGHBORS = 30          # geometry-central's PointPositionGeometry::kNeighborSize
 
 
-# ---------------------------------------------------------------------------------------------------
-# Neighbours: the k nearest, ties by index
-# ---------------------------------------------------------------------------------------------------
-
-def _sq_dist(points: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
-    """Squared distances ((dx^2) + dy^2) + dz^2, d = query - point (as nanoflann's L2_Simple_Adaptor)."""
-    d = points[rows] - points[cols]
-    return (d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1]) + d[..., 2] * d[..., 2]
-
-
 def _nearest(points: np.ndarray, k: int = K_NEIGHBORS) -> np.ndarray:
     """(N, k): geometry-central's kNearestNeighbors, the k + 1 nearest without the point itself (without
     the last one if the point is not among them), nearest first. scipy's k-d tree finds them; where two
@@ -94,7 +84,10 @@ def _nearest(points: np.ndarray, k: int = K_NEIGHBORS) -> np.ndarray:
     if len(rows):
         # The boundary decides which point is the k-th; the order, the normal's rounding.
         c = cand[rows]
-        cand[rows] = np.take_along_axis(c, _rowwise_lexsort(_sq_dist(points, rows[:, None], c), c), 1)
+        d = points[rows[:, None]] - points[c]                  # query - point, as nanoflann's L2_Simple_Adaptor
+        sq = (d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1]) + d[..., 2] * d[..., 2]
+        by_row = np.repeat(np.arange(len(rows)), c.shape[1])
+        cand[rows] = c.ravel()[np.lexsort((c.ravel(), sq.ravel(), by_row))].reshape(c.shape)  # per row by sq, c
     cand = cand[:, :want]
     is_self = cand == np.arange(n)[:, None]
     first_self = np.where(is_self.any(1), is_self.argmax(1), want - 1)
@@ -103,22 +96,11 @@ def _nearest(points: np.ndarray, k: int = K_NEIGHBORS) -> np.ndarray:
     return cand[keep].reshape(n, k)
 
 
-def _rowwise_lexsort(primary: np.ndarray, secondary: np.ndarray) -> np.ndarray:
-    """Per row, the order sorting by primary then secondary."""
-    rows = np.repeat(np.arange(len(primary)), primary.shape[1])
-    order = np.lexsort((secondary.ravel(), primary.ravel(), rows))
-    return (order - rows * primary.shape[1]).reshape(primary.shape)
-
-
-# ---------------------------------------------------------------------------------------------------
-# Tufted cover of the triangle soup, operators
-# ---------------------------------------------------------------------------------------------------
-
 def local_triangulations(points, neighbors: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Each point's normal (N, 3) and its local Delaunay triangles, the soup (F, 3) of
     :class:`CloudHeatDistance` (its ``neighbors``: potpourri3d's 30 nearest where None); compiled
-    (``src/local_triangulation.cpp``), in blocks of rows on torch's threads (:func:`gegnn.threads.by_rows`). ValueError for
-    points the method cannot take."""
+    (``src/local_triangulation.cpp``), in blocks of rows on torch's threads (:func:`gegnn.threads.by_rows`).
+    ValueError for points the method cannot take."""
     from .._local_triangulation import local_triangulations as triangulate
 
     p = np.ascontiguousarray(points, dtype=np.float64)

@@ -56,6 +56,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from geodata.mesh import edge_face_counts
+
 from .. import threads
 
 __all__ = ["HeatSolver", "HeatDistance", "cover_problem", "tufted_cover", "mollify", "flip_to_delaunay", "operators",
@@ -77,18 +79,9 @@ def cover_problem(vertices, faces) -> str | None:
         return "face indices out of range or unreferenced vertices"
     if ((f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 2] == f[:, 0])).any():
         return "face with a repeated vertex"
-    if np.bincount(_edge_keys(f, len(v))[1]).max() > 2:
+    if edge_face_counts(f)[1].max() > 2:
         return "non-manifold edges"
     return None
-
-
-def _edge_keys(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """For the halfedges 3f + c (corner c to c + 1): each edge's first halfedge, in order of the edge
-    keys, and each halfedge's index into it."""
-    tail, tip = faces.reshape(-1), faces[:, [1, 2, 0]].reshape(-1)
-    _, first, inverse = np.unique(np.minimum(tail, tip) * n + np.maximum(tail, tip), return_index=True,
-                                  return_inverse=True)
-    return first, inverse
 
 
 @dataclass
@@ -182,14 +175,12 @@ def _heron_halves(a, b, c):
                       (-c * c + a * a + b * b) / (4.0 * area) / 2)
 
 
-def _cotan_halves(cover: _Cover) -> np.ndarray:
-    """Per halfedge, half the cotangent of the angle opposite it in its face (:func:`_heron_halves`)."""
-    h0 = cover.f_he
+def _cotan_halves(cover: _Cover, half: np.ndarray, h0: np.ndarray) -> None:
+    """Into ``half``, for the faces of first halfedges ``h0``: per halfedge, half the cotangent of the angle
+    opposite it in its face (:func:`_heron_halves`)."""
     h1 = cover.nxt[h0]
     h2 = cover.nxt[h1]
-    half = np.empty(len(cover.nxt))
     half[h0], half[h1], half[h2] = _heron_halves(*(cover.length[cover.edge[h]] for h in (h0, h1, h2)))[1]
-    return half
 
 
 def flip_to_delaunay(cover: _Cover, eps: float = DELAUNAY_EPS) -> int:
@@ -199,7 +190,8 @@ def flip_to_delaunay(cover: _Cover, eps: float = DELAUNAY_EPS) -> int:
     is not finite or a vertex has degree 1); an edge refused waits until one of its faces changes."""
     nxt, vert, face, sib, edge, e_he, f_he, length = (cover.nxt, cover.vert, cover.face, cover.sib, cover.edge,
                                                       cover.e_he, cover.f_he, cover.length)
-    half = _cotan_halves(cover)
+    half = np.empty(len(nxt))
+    _cotan_halves(cover, half, f_he)
     weight = half[e_he] + half[sib[e_he]]
     refused = np.zeros(len(length), dtype=bool)
     owner = np.empty(len(f_he), dtype=np.int64)
@@ -232,26 +224,17 @@ def flip_to_delaunay(cover: _Cover, eps: float = DELAUNAY_EPS) -> int:
         e, ha1, hb1, fa, fb, ha2, hb2, ha3, hb3, new = (a[ok] for a in (e, ha1, hb1, fa, fb, ha2, hb2, ha3, hb3,
                                                                         new))
         n_flips += len(e)
-        relink(nxt, vert, face, f_he, fa, fb, (ha1, ha2, ha3), (hb1, hb2, hb3))
+        # the halfedge links after the flips: fa's new first halfedge is ha1, fb's hb1
+        f_he[fa], f_he[fb] = ha1, hb1
+        nxt[ha1], nxt[hb3], nxt[ha2] = hb3, ha2, ha1
+        nxt[hb1], nxt[ha3], nxt[hb2] = ha3, hb2, hb1
+        vert[ha1], vert[hb1] = vert[ha3], vert[hb3]
+        face[ha3], face[hb3] = fb, fa
         length[e] = new
-        for h0 in (ha1, hb1):                                 # the two new faces, from their first halfedge
-            h1 = nxt[h0]
-            h2 = nxt[h1]
-            half[h0], half[h1], half[h2] = _heron_halves(length[edge[h0]], length[edge[h1]], length[edge[h2]])[1]
+        _cotan_halves(cover, half, np.concatenate([ha1, hb1]))  # the two new faces of every flip
         touched = edge[np.concatenate([ha1, ha2, ha3, hb1, hb2, hb3])]
         weight[touched] = half[e_he[touched]] + half[sib[e_he[touched]]]
         refused[touched] = False
-
-
-def relink(nxt, vert, face, f_he, fa, fb, a, b) -> None:
-    """The halfedge links after flipping the edge between faces ``fa`` (halfedges ``a`` = (a1, a2, a3),
-    a1 on the edge) and ``fb`` (``b``, b1 its twin): one flip (ints) or many disjoint ones (index arrays)."""
-    (ha1, ha2, ha3), (hb1, hb2, hb3) = a, b
-    f_he[fa], f_he[fb] = ha1, hb1
-    nxt[ha1], nxt[hb3], nxt[ha2] = hb3, ha2, ha1
-    nxt[hb1], nxt[ha3], nxt[hb2] = ha3, hb2, hb1
-    vert[ha1], vert[hb1] = vert[ha3], vert[hb3]
-    face[ha3], face[hb3] = fb, fa
 
 
 def _layout(pax, pay, pbx, pby, l_bc, l_ca):
@@ -349,11 +332,9 @@ def gradient_divergence(corner: np.ndarray, vec: np.ndarray, whalf: np.ndarray, 
 
 
 class HeatSolver:
-    """The heat method's two solves on operators built once (a subclass builds them): :math:`(M + tL)`,
-    :math:`(L + 10^{-6} I)` factored (Eigen's SimplicialLLT, AMD order), the per-face gradient and
-    divergence; then :meth:`distances` for any sources, in blocks of 16 spread over torch's threads
-    (:mod:`gegnn.threads`), or :meth:`distance` for one (src/heat_ops.cpp: without the interpreter; the
-    same fields for any thread count).
+    """The heat method's two solves (see the module) on operators a subclass builds once: :meth:`distances`
+    for any sources, on torch's threads (:mod:`gegnn.threads`; the same fields for any thread count), or
+    :meth:`distance` for one.
 
     Attributes:
         n: vertex count; t: the time step.
@@ -376,7 +357,7 @@ class HeatSolver:
         try:
             arrays = [np.ascontiguousarray(a, dtype=dt) for m in (heat, poisson, grad.tocsr(), div.tocsr())
                       for a, dt in ((m.indptr, np.int64), (m.indices, np.int64), (m.data, np.float64))]
-            self._fields = HeatFields(*arrays, n=self.n)
+            self._fields = HeatFields(*arrays, self.n)  # (M + tL), (L + shift I), G, D: CSR arrays
         except RuntimeError as exc:
             raise ValueError(f"{what}: cannot factor ({exc})") from None
 

@@ -83,9 +83,6 @@ def landmark_fields(vertices, faces, k: int, seed: int = 0, t_coef: float = T_CO
         k: landmarks per component (>= 1).
         seed: choice of the first landmark of every component.
         t_coef: heat-method time step (potpourri3d ``t_coef``).
-
-    Returns:
-        :class:`LandmarkFields`
     """
     return landmark_solver(vertices, faces, k, t_coef)(seed)
 
@@ -130,12 +127,9 @@ def landmark_solver(vertices, faces, k: int, t_coef: float = T_COEF) -> Callable
 
 
 def _heat_field(vertices, faces, t_coef: float, fields: int):
-    """``field(source) -> (N,)``: the distance field of one source vertex by potpourri3d's robust heat
-    method, computed by :class:`gegnn.fields.heat.HeatDistance` (the same fields to solver rounding) where that
-    pays: its setup costs more than potpourri3d's (flips in Python), each field less (0.7 against 2.4 ms
-    at 5k vertices), so from HEAT_MIN_VERTICES vertices and HEAT_MIN_FIELDS fields. potpourri3d itself
-    on smaller parts and on meshes that HeatDistance does not cover (non-manifold edges, faces
-    repeating a vertex, non-finite coordinates)."""
+    """``field(source) -> (N,)``: potpourri3d's robust heat method, by :class:`gegnn.fields.heat.HeatDistance`
+    where that pays (see the module), by potpourri3d itself elsewhere and on meshes that HeatDistance does
+    not cover (:func:`gegnn.fields.heat.cover_problem`)."""
     if len(vertices) >= HEAT_MIN_VERTICES and fields >= HEAT_MIN_FIELDS:
         try:
             return HeatDistance(vertices, faces, t_coef).distance

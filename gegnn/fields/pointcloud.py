@@ -41,8 +41,8 @@ from .. import threads
 from .landmarks import LandmarkFields, graph_farthest_points, landmark_columns
 
 __all__ = ["CloudGraph", "cloud_graph", "mls_project", "surface_neighbors", "knn_edges", "graph_parts",
-           "pca_normals", "unoriented_normals", "orient_normals", "cloud_landmark_fields", "cloud_landmark_solver", "KNN",
-           "CLOUD_T_COEF"]
+           "pca_normals", "unoriented_normals", "orient_normals", "cloud_landmark_fields", "cloud_landmark_solver",
+           "KNN", "CLOUD_T_COEF"]
 
 KNN = 8             # neighbours a point's graph edges and normal come from
 CLOUD_T_COEF = 1.0  # potpourri3d's default time step for point clouds (the mesh fields' 0.5: worse on
@@ -238,8 +238,7 @@ def cloud_landmark_solver(points: np.ndarray, part: np.ndarray, t_coef: float = 
 def collinear(points: np.ndarray) -> bool:
     """Whether the points lie on one line (to 1e-9 of their extent): no surface, no local triangles (the
     heat method's solvers fail on them)."""
-    centered = points - points.mean(axis=0)
-    s = np.linalg.svd(centered, compute_uv=False)
+    s = np.linalg.svd(points - points.mean(axis=0), compute_uv=False)
     return bool(s[1] <= 1e-9 * s[0]) if len(s) > 1 else True
 
 

@@ -132,5 +132,4 @@ def weyl_shape(s: Tensor, table: Tensor) -> Tensor:
     i = x.floor().clamp_(max=TABLE_SIZE - 1)
     t = x.sub_(i)
     i = i.long()
-    lo, hi = table[i], table[i + 1]
-    return torch.lerp(lo, hi, t).masked_fill_(s >= S_MAX, 1.0)
+    return torch.lerp(table[i], table[i + 1], t).masked_fill_(s >= S_MAX, 1.0)

@@ -74,9 +74,8 @@ class Embedding:
         shape = i.shape
         i, j = i.reshape(-1), j.reshape(-1)
         if len(i):
-            lo_i, hi_i = i.aminmax()
-            lo_j, hi_j = j.aminmax()
-            lo, hi = torch.stack([lo_i.minimum(lo_j), hi_i.maximum(hi_j)]).tolist()
+            lo_i, hi_i, lo_j, hi_j = torch.stack([*i.aminmax(), *j.aminmax()]).tolist()
+            lo, hi = min(lo_i, lo_j), max(hi_i, hi_j)
             if lo < 0 or hi >= self.num_vertices:
                 raise IndexError(f"vertex index out of range: {lo if lo < 0 else hi} "
                                  f"(the mesh has {self.num_vertices} vertices)")
@@ -114,7 +113,8 @@ class Embedding:
                 parts = []
                 for s in range(0, len(i), self.surface_chunk):
                     a, b = i[s:s + self.surface_chunk], j[s:s + self.surface_chunk]
-                    codes = torch.cat([self._blend(corners_a[a], weights_a[a]), self._blend(corners_b[b], weights_b[b])])
+                    codes = torch.cat([self._blend(corners_a[a], weights_a[a]),
+                                       self._blend(corners_b[b], weights_b[b])])
                     n = torch.arange(len(a), device=device)
                     parts.append(self._decode_points(codes, torch.cat([pos_a[a], pos_b[b]]), n, n + len(a)))
                 out = torch.cat(parts) if parts else torch.empty(0, device=device)

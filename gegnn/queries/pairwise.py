@@ -44,7 +44,7 @@ class MatrixFile:
             import zarr
 
             self._zarr = zarr.create_array(self.partial, shape=self.shape, dtype=self.dtype,
-                                           chunks=(min(chunk, max(self.shape[0], 1)), min(chunk, max(self.shape[1], 1))))
+                                           chunks=tuple(min(chunk, max(size, 1)) for size in self.shape))
             self._file = None
         else:
             header = {"descr": np.lib.format.dtype_to_descr(self.dtype), "fortran_order": False, "shape": self.shape}

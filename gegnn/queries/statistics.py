@@ -98,5 +98,5 @@ def triangle_violations(distance, n_vertices: int, triples: int = 100_000, seed:
     d_pq, d_px, d_xq = distance(p, q), distance(p, x), distance(x, q)
     excess = (d_pq - d_px - d_xq) / np.maximum(d_pq, 1e-300)
     bad = excess > tolerance
-    return TriangleReport(int(len(p)), float(bad.mean()), float(excess[bad].mean()) if bad.any() else 0.0,
-                          float(excess[bad].max()) if bad.any() else 0.0)
+    worst = excess[bad] if bad.any() else np.zeros(1)
+    return TriangleReport(len(p), float(bad.mean()), float(worst.mean()), float(worst.max()))
