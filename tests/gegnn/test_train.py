@@ -1,5 +1,7 @@
 import csv
+import dataclasses
 import logging
+import re
 import socket
 from pathlib import Path
 
@@ -65,8 +67,10 @@ def test_run_files_and_resume_equals_uninterrupted(tiny_store, tmp_path, monkeyp
     with open(out / "metrics.csv") as f:
         rows = list(csv.DictReader(f))
     assert [int(r["epoch"]) for r in rows] == [0, 1] and list(rows[0]) == gtrain.METRICS
+    assert [r["step"] for r in rows] == ["2", "4"]  # 4 training meshes, batches of 2
     log = (out / "train.log").read_text()
     assert "epoch 1 step 4 lr" in log and "train_mre" in log and "val_mre" in log
+    assert all(re.match(r"\d{4}-\d\d-\d\d \d\d:\d\d:\d\d ", line) for line in log.splitlines())  # greppable by time
 
 
 def test_the_curves_are_drawn_at_once_and_with_the_last_epoch(tiny_store, tmp_path, monkeypatch):
@@ -98,6 +102,49 @@ def test_a_run_warms_the_decoder_alone_first_and_not_again_when_resumed(tiny_sto
     assert "decoder warm-up: 5 steps on" in log and "after the decoder warm-up: val_mre" in log
     train(config(tiny_store, run, epochs=2, decoder_warmup=5, resume=True), small_config(landmarks=4))
     assert calls == [5]
+
+
+def test_a_step_sets_the_learning_rate_it_is_given(tiny_store):
+    torch.manual_seed(0)
+    model = GeGnn(small_config())
+    batch = BatchDataset(tiny_store, "geodesic", 0, 200, False, 5, 1 / 16, 3 / 16)[(0, ("grid", "sphere"))]
+    optimizer = torch.optim.AdamW(model.parameters(), lr=1.0, weight_decay=0.05)
+    before = {k: v.clone() for k, v in model.state_dict().items()}
+    gtrain.train_step(model, batch, optimizer, 0.0, 1.0, torch.device("cpu"))
+    assert optimizer.param_groups[0]["lr"] == 0.0
+    assert all(torch.equal(v, before[k]) for k, v in model.state_dict().items())  # lr 0: nothing moves
+    gtrain.train_step(model, batch, optimizer, 1e-3, 1.0, torch.device("cpu"))
+    assert optimizer.param_groups[0]["lr"] == 1e-3
+    assert not all(torch.equal(v, before[k]) for k, v in model.state_dict().items())
+
+
+@pytest.mark.parametrize("batch_size", [1, 3])
+def test_an_epochs_train_mre_is_the_mean_of_its_steps_losses(tiny_store, tmp_path, monkeypatch, batch_size):
+    """Also for an epoch of one step (3 training meshes in one batch)."""
+    losses, real = [], gtrain.train_step
+    monkeypatch.setattr(gtrain, "train_step", lambda *a: losses.append(real(*a)) or losses[-1])
+    rows = train(config(tiny_store, tmp_path / "run", epochs=1, batch_size=batch_size), small_config())
+    assert len(losses) == 3 // batch_size
+    assert float(rows[0]["train_mre"]) == pytest.approx(torch.stack(losses).double().mean().item(), abs=1e-6)
+
+
+def test_a_run_without_resume_starts_afresh_where_one_ended(tiny_store, tmp_path):
+    train(config(tiny_store, tmp_path / "run"), small_config())
+    rows = train(config(tiny_store, tmp_path / "run", epochs=1), small_config())
+    assert [r["epoch"] for r in rows] == ["0"]
+    with open(tmp_path / "run" / "metrics.csv") as f:
+        assert [r["epoch"] for r in csv.DictReader(f)] == ["0"]
+
+
+def test_a_run_reads_the_distances_and_the_graph_it_is_asked_for(tiny_store, one_mesh_store, tmp_path, monkeypatch):
+    """--distance biharmonic on a store without biharmonic distances is refused (never trained on geodesic
+    ones); a point-cloud model's batches are built on its k-nearest-neighbour graph."""
+    with pytest.raises(ValueError, match="no committed meshes with biharmonic distances"):
+        train(config(one_mesh_store, tmp_path / "b", distance="biharmonic"), small_config(spectral=4))
+    made = []
+    monkeypatch.setattr(gtrain, "BatchDataset", lambda *a: made.append(a[-1]) or BatchDataset(*a))
+    train(config(tiny_store, tmp_path / "p", epochs=1), small_config(landmarks=4, points=8))
+    assert made == [8, 8]  # the training and the validation batches
 
 
 def test_init_starts_from_weights(tiny_store, tmp_path):
@@ -146,6 +193,35 @@ def test_init_keeps_a_landmark_decoder_for_another_k(tiny_store, tmp_path):
                                   torch.device("cpu"))[0].state_dict()
     decoder = [k for k in interval if k.startswith("distance.") and k.endswith("weight")]
     assert decoder and not any(torch.equal(interval[k], ckpt[k].to(interval[k].dtype)) for k in decoder)
+
+
+def test_init_takes_the_decoder_kind_asked_for_and_the_networks_shape_from_the_checkpoint(tiny_store, tmp_path):
+    """--init from a paper model: --euclidean-decoder is taken (the network's tensors kept); the network's
+    blocks come from the checkpoint whatever the command line says; training it for biharmonic distances
+    keeps the same decoder's weights (another distance, the same inputs); the fresh tensors are logged."""
+    torch.manual_seed(0)
+    paper = GeGnn(small_config())
+    with torch.no_grad():
+        for p in paper.distance.parameters():
+            p.normal_()
+    paper.save(tmp_path / "paper.safetensors")
+    ckpt = load_checkpoint(tmp_path / "paper.safetensors").model_state
+    init = TrainConfig(store=tiny_store, run=str(tmp_path / "b"), init=str(tmp_path / "paper.safetensors"))
+    messages = []
+    log = logging.getLogger("test_init")
+    log.info = messages.append
+    euclidean = gtrain.build_model(init, small_config(blocks=2, decoder="euclidean"), None, torch.device("cpu"), log)[0]
+    assert euclidean.config == small_config(decoder="euclidean")
+    assert not any(k.startswith("distance.") for k in euclidean.state_dict())  # the Euclidean decoder has no weights
+    assert all(torch.equal(v, ckpt[k]) for k, v in euclidean.state_dict().items())
+    spectral = gtrain.build_model(init, small_config(blocks=2, spectral=4), None, torch.device("cpu"), log)[0]
+    assert spectral.config.decoder_blocks == (1,) * 5 and spectral.config.spectral == 4
+    assert len(messages) == 1 and messages[0].startswith(f"--init {init.init}: ")
+    assert "start fresh (distance." in messages[0]
+    biharmonic = dataclasses.replace(init, distance="biharmonic")
+    model = gtrain.build_model(biharmonic, small_config(), None, torch.device("cpu"))[0]
+    assert model.config.distance == "biharmonic"
+    assert all(torch.equal(v, ckpt[k]) for k, v in model.state_dict().items())
 
 
 def test_the_schedule_at_known_steps():
