@@ -39,16 +39,15 @@ def triangulate_polygon(points: np.ndarray) -> list[tuple[int, int, int]]:
     if len(points) == 4:
         return _split_quad(points)  # zero-area triangles are dropped by the load stage
     extent = np.ptp(points, axis=0).max()
-    xy = _project(points)
+    xy = _project(points)  # counter-clockwise in its plane: the plane's normal is the polygon's own
     area = 0.0 if xy is None else _signed_area(xy)  # None: no area in any plane
-    if abs(area) <= FLAT_AREA * extent * extent:
+    if area <= FLAT_AREA * extent * extent:
         return []
-    order = list(range(len(xy))) if area > 0 else list(range(len(xy)))[::-1]
-    tris = _ear_clip(xy, order)
+    tris = _ear_clip(xy, list(range(len(xy))))
     covered = sum(abs(_tri_area(xy[a], xy[b], xy[c])) for a, b, c in tris)
-    if abs(covered - abs(area)) > AREA_TOLERANCE * abs(area):
-        raise PolygonError(f"self-intersecting in its plane (triangles cover {covered / abs(area):.3g}x its area)")
-    return tris if area > 0 else [(a, c, b) for a, b, c in tris]
+    if abs(covered - area) > AREA_TOLERANCE * area:
+        raise PolygonError(f"self-intersecting in its plane (triangles cover {covered / area:.3g}x its area)")
+    return tris
 
 
 def _faithful(points: np.ndarray, where: str) -> list[tuple[int, int, int]]:
@@ -71,7 +70,8 @@ def _split_quad(p: np.ndarray) -> list[tuple[int, int, int]]:
 
 
 def _project(points: np.ndarray) -> np.ndarray | None:
-    """The polygon in its plane (Newell's normal); None when it has no normal."""
+    """The polygon in its plane (Newell's normal n, axes u and n x u): counter-clockwise there, its signed
+    area |n| / 2 > 0; None when it has no normal."""
     nxt = np.roll(points, -1, axis=0)
     normal = np.array([np.sum((points[:, 1] - nxt[:, 1]) * (points[:, 2] + nxt[:, 2])),
                        np.sum((points[:, 2] - nxt[:, 2]) * (points[:, 0] + nxt[:, 0])),

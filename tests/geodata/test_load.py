@@ -4,7 +4,7 @@ import re
 import numpy as np
 import pytest
 
-from geodata.mesh import MeshError, closed_manifold_problem
+from geodata.mesh import MeshError, closed_manifold_problem, face_areas
 from geodata.stages.load import load_mesh_bytes
 from realworld_files import CUBE_QUADS, CUBE_V, quads_obj, ring_obj, ring_ply
 
@@ -73,6 +73,12 @@ BAD_INPUTS = {
     "ASCII PLY body short": (PLY_HEAD.replace(b"{fmt}", b"ascii") + b"0 0 0\n1 0 0\n", ".ply",
                              "PLY header declares 3 vertices and 1 faces but the file holds 2 data lines"),
     "OBJ point cloud": (b"v 0 0 0\nv 1 0 0\nv 0 1 0\n", ".obj", "point cloud: 3 vertices and no faces"),
+    "OFF corner not an index": (b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 1.5\n", ".off",
+                                "line 6: face corner '1.5' is not a vertex index"),
+    "PLY element without a count": (b"ply\nformat ascii 1.0\nelement vertex abc\nproperty float x\nend_header\n",
+                                    ".ply", "header line 3: 'element vertex abc': an element needs a name and a count"),
+    "binary STL short": (b"\0" * 80 + (5).to_bytes(4, "little") + b"\0" * 20, ".stl",
+                         "binary STL header declares 5 triangles (334 bytes) but the file has 104 bytes"),
 }
 
 
@@ -158,9 +164,16 @@ def test_latin1_text_loads_without_optional_modules():
     np.testing.assert_array_equal(a.faces, b.faces)
 
 
-def test_negative_obj_indices_are_valid():
-    quad = b"v 0 0 0\nv 1 0 0\nv 1 1 0\nf -3 -2 -1\nv 0 1 0\nf -4 -2 -1\n"
-    assert load_mesh_bytes(quad, ".obj").n_faces == 2
+def test_negative_obj_indices_count_back_from_their_own_line():
+    """OBJ's relative indices (with texture and normal indices, a blank line between) are the absolute ones
+    of the same file: counted back from the face's line, not from the file's end."""
+    head = b"v 0 0 0\nv 1 0 0\nv 1 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvn 0 0 1\n\n"
+    relative = head + b"f -3/-3/-1 -2/-2/-1 -1/-1/-1\nv 0 1 0\nvt 0 1\nf -4/-4/-1 -2/-2/-1 -1/-1/-1\n"
+    absolute = head + b"f 1/1/1 2/2/1 3/3/1\nv 0 1 0\nvt 0 1\nf 1/1/1 3/3/1 4/4/1\n"
+    a, b = load_mesh_bytes(relative, ".obj"), load_mesh_bytes(absolute, ".obj")
+    np.testing.assert_array_equal(a.vertices, b.vertices)
+    np.testing.assert_array_equal(a.faces, b.faces)
+    assert a.n_faces == 2 and abs(face_areas(a.vertices, a.faces).sum() - 1.0) < 1e-12  # the unit square
 
 
 def test_obj_with_texture_and_normal_seams_keeps_the_files_vertex_numbering(tmp_path):
