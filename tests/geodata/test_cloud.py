@@ -30,6 +30,7 @@ def ply(rows, binary=False) -> bytes:
 @pytest.mark.parametrize("name,data,normals", [
     ("a.xyz", "# scan\nx y z\n" + text(P), False),
     ("a.csv", text(P, ","), False),
+    ("b.csv", text(P, ";"), False),  # a spreadsheet's export where the decimal mark is a comma
     ("a.pts", text(np.hstack([P, N])), True),
     ("a.ply", ply(np.hstack([P, N])), True),
     ("b.ply", ply(np.hstack([P, N]), binary=True), True),
@@ -86,6 +87,8 @@ def test_outliers_are_the_points_far_from_all_others():
     p = np.concatenate([P, [[30.0, 0, 0], [0, -25.0, 0]]])
     assert outliers(p).tolist() == [40, 41]
     assert outliers(P).tolist() == []
+    for scale in (1e-3, 1e3):  # in any unit
+        assert outliers(p * scale).tolist() == [40, 41] and outliers(P * scale).tolist() == []
 
 
 def test_a_tenfold_density_change_is_not_an_outlier():
