@@ -40,9 +40,10 @@ def tipping_margin(vertices: np.ndarray, faces: np.ndarray | None, up: np.ndarra
     if faces is None:
         centroid = vertices.mean(axis=0)
     else:
-        tri = vertices[faces]
-        area = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
-        centroid = (tri.mean(axis=1) * area[:, None]).sum(axis=0) / max(area.sum(), 1e-300)
+        from geodata.mesh import face_areas
+
+        area = face_areas(vertices, faces)
+        centroid = (vertices[faces].mean(axis=1) * area[:, None]).sum(axis=0) / max(area.sum(), 1e-300)
     height = vertices @ up
     base = vertices[height <= height.min() + SUPPORT * np.ptp(vertices, axis=0).max()]
     e1 = np.cross(up, (1.0, 0, 0) if abs(up[0]) < 0.9 else (0, 1.0, 0))
