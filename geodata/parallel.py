@@ -3,6 +3,10 @@
 Native mesh code (Kirsanov's exact geodesics, pymeshlab) can segfault or leak; a dead joblib worker
 fails the whole `Parallel` call (joblib#812). So the joblib worker only supervises: it forks a child
 per mesh, and a child that dies or hangs becomes that mesh's failure, never the batch's.
+
+A child may also be given a memory limit (`max_memory`): a mesh that would need more fails as "out of
+memory" instead of growing until the kernel's OOM killer ends it, which a scheduler counts against the
+whole job (SLURM marks the array task OUT_OF_MEMORY, and every `afterok` dependency fails with it).
 """
 from __future__ import annotations
 
@@ -12,6 +16,7 @@ import hashlib
 import io
 import os
 import pickle
+import resource
 import select
 import signal
 import sys
@@ -21,19 +26,31 @@ from typing import Any, Callable, Iterable, Iterator
 
 from geodata.mesh import MeshError, one_line
 
-__all__ = ["BACKENDS", "run_isolated", "parallel_map", "parse_shard", "in_shard"]
+__all__ = ["BACKENDS", "run_isolated", "parallel_map", "parse_shard", "in_shard", "default_max_memory",
+           "parse_memory", "MEMORY_FRACTION"]
 
 BACKENDS = ("loky", "dask", "ray")
+MEMORY_FRACTION = 0.9  # of a task's memory, shared by its per-mesh processes; the rest for their supervisors
+GiB = 1 << 30
 
 
 def run_isolated(fn: Callable[..., Any], *args, timeout: float | None = None,
-                 warnings_out: list[str] | None = None) -> Any:
+                 warnings_out: list[str] | None = None, max_memory: int | None = None) -> Any:
     """fn(*args) in a forked child; MeshError when it raises one, dies, or exceeds `timeout` seconds.
 
     The child reports the stage it enters through `stage(name)` (see `current_stage`), so a crash is
     blamed on the right stage. Python warnings raised in the child (libraries' RuntimeWarnings...)
     never reach the console: each distinct one is appended to `warnings_out` as "[stage] Category:
     message", for the caller to log.
+
+    `max_memory` (bytes, None: no limit) caps the child's data size: its heap and private anonymous
+    mappings (RLIMIT_DATA, Linux >= 4.7), what it inherited from this process included (0.2-0.5 GiB
+    measured with geodata's libraries and torch loaded). An allocation beyond it fails in the child and
+    the mesh fails with MeshError(stage, "out of memory: over the --max-memory limit of X GiB"): NumPy's
+    MemoryError, the exact solver's std::bad_alloc (pybind11 raises MemoryError) and pymeshlab's (a
+    PyMeshLabException naming std::bad_alloc) all do, measured; a native abort under a limit (an
+    uncaught std::bad_alloc ends in SIGABRT) is reported so too. RLIMIT_AS, the address space, is not
+    used: torch's import alone reserves 1.0 GiB of it, none of it memory.
     """
     if not hasattr(os, "fork"):  # no process isolation on this platform
         return fn(*args)
@@ -41,7 +58,7 @@ def run_isolated(fn: Callable[..., Any], *args, timeout: float | None = None,
     pid = os.fork()
     if pid == 0:  # child
         os.close(read_fd)
-        _child(fn, args, write_fd)
+        _child(fn, args, write_fd, max_memory)
     os.close(write_fd)
     data, timed_out = _read_all(read_fd, timeout, pid)
     _, wait_status = os.waitpid(pid, 0)
@@ -58,7 +75,10 @@ def run_isolated(fn: Callable[..., Any], *args, timeout: float | None = None,
         raise MeshError(stage, f"timed out after {timeout:g} s")
     if os.WIFSIGNALED(wait_status):
         name = signal.Signals(os.WTERMSIG(wait_status)).name
-        raise MeshError(stage, f"native crash ({name}) in the worker process")
+        if max_memory is not None and name == "SIGABRT":  # how native code ends on an uncaught bad_alloc
+            raise MeshError(stage, f"{_over_limit(max_memory)} (native abort, SIGABRT)")
+        under = f", under a --max-memory limit of {max_memory / GiB:.3g} GiB" if max_memory is not None else ""
+        raise MeshError(stage, f"native crash ({name}) in the worker process{under}")
     raise MeshError(stage, f"worker process exited with code {os.waitstatus_to_exitcode(wait_status)}")
 
 
@@ -81,23 +101,41 @@ def _report_warning(message, category, filename, lineno, file=None, line=None) -
         os.write(_report_fd, pickle.dumps(("warning", text)))
 
 
-def _child(fn, args, write_fd: int) -> None:
-    global _report_fd
-    _report_fd = write_fd
+def _over_limit(max_memory: int) -> str:
+    return f"out of memory: over the --max-memory limit of {max_memory / GiB:.3g} GiB"
+
+
+def _child(fn, args, write_fd: int, max_memory: int | None) -> None:
+    global _report_fd, _stage
+    _report_fd, _stage = write_fd, "unknown"
     faulthandler.disable()  # a crash is reported by the parent in one line, not as a dump here
     warnings.simplefilter("default")  # each distinct warning once, through the pipe
     warnings.showwarning = _report_warning
     code = 0
     try:
+        out_of_memory = "out of memory"
+        if max_memory is not None:
+            hard = resource.getrlimit(resource.RLIMIT_DATA)[1]
+            limit = max_memory if hard == resource.RLIM_INFINITY else min(max_memory, hard)
+            resource.setrlimit(resource.RLIMIT_DATA, (limit, hard))
+            out_of_memory = _over_limit(max_memory)
         try:
             message = ("result", fn(*args))
         except MeshError as exc:
-            message = ("error", (exc.stage, exc.reason))
+            reason = out_of_memory if "bad_alloc" in exc.reason else exc.reason
+            message = ("error", (exc.stage, reason))
         except MemoryError:
-            message = ("error", ("unknown", "out of memory"))
+            message = ("error", (_stage, out_of_memory))
         except Exception as exc:  # any bug must still become a one-line failure of this mesh
-            message = ("error", ("unknown", one_line(exc)))
-        view = memoryview(pickle.dumps(message, protocol=pickle.HIGHEST_PROTOCOL))
+            if "bad_alloc" in str(exc):  # pymeshlab wraps a failed allocation: "... Details: std::bad_alloc"
+                message = ("error", (_stage, out_of_memory))
+            else:
+                message = ("error", ("unknown", one_line(exc)))
+        try:
+            data = pickle.dumps(message, protocol=pickle.HIGHEST_PROTOCOL)
+        except MemoryError:  # a result too large for the limit
+            data = pickle.dumps(("error", (_stage, out_of_memory)))
+        view = memoryview(data)
         while view:
             view = view[os.write(write_fd, view):]
     except BaseException:
@@ -150,6 +188,80 @@ def in_shard(key: str, shard: tuple[int, int]) -> bool:
     """Stable assignment of a work item to one of N shards by a hash of its key."""
     k, n = shard
     return int.from_bytes(hashlib.sha1(key.encode()).digest()[:8], "big") % n == k
+
+
+def default_max_memory(jobs: int, fraction: float = MEMORY_FRACTION) -> int | None:
+    """A per-mesh process's share of this task's memory, in bytes: ``fraction`` of the allocation over
+    ``jobs`` processes. The allocation is, the first found: SLURM's ``SLURM_MEM_PER_CPU`` x
+    ``SLURM_CPUS_PER_TASK`` or ``SLURM_MEM_PER_NODE`` (MB, as SLURM writes them); the memory limit of
+    this process's cgroup (v2 ``memory.max``, v1 ``memory.limit_in_bytes``, the lowest on its path);
+    the machine's physical memory. None where none can be read."""
+    total = _slurm_memory() or _cgroup_memory()
+    try:
+        physical = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        physical = None
+    total = total or physical
+    if total is None:
+        return None
+    return int(total * fraction) // max(jobs, 1)
+
+
+def _slurm_memory() -> int | None:
+    def megabytes(name: str) -> int | None:
+        try:
+            return int(os.environ[name]) << 20
+        except (KeyError, ValueError):
+            return None
+
+    per_cpu = megabytes("SLURM_MEM_PER_CPU")
+    if per_cpu:
+        cpus = os.environ.get("SLURM_CPUS_PER_TASK", "1")
+        return per_cpu * (int(cpus) if cpus.isdigit() else 1)
+    return megabytes("SLURM_MEM_PER_NODE") or None
+
+
+def _cgroup_memory(proc_cgroup: str = "/proc/self/cgroup", mount: str = "/sys/fs/cgroup") -> int | None:
+    """The lowest memory limit on this process's cgroup path (None: unlimited or unknown). Inside a
+    container with its own cgroup namespace the path may name the host's tree: the mount's own files count."""
+    try:
+        lines = open(proc_cgroup).read().splitlines()
+    except OSError:
+        return None
+    limits = []
+    for line in lines:
+        _, controllers, path = line.split(":", 2)
+        if controllers == "":  # v2: one unified tree
+            folder, file = mount, "memory.max"
+        elif "memory" in controllers.split(","):
+            folder, file = os.path.join(mount, "memory"), "memory.limit_in_bytes"
+        else:
+            continue
+        parts = [p for p in path.split("/") if p]
+        for depth in range(len(parts) + 1):
+            try:
+                text = open(os.path.join(folder, *parts[:depth], file)).read().strip()
+            except OSError:
+                continue
+            if text.isdigit() and int(text) < 1 << 60:  # v2 "max", v1 a page-rounded 2^63: no limit
+                limits.append(int(text))
+    return min(limits) if limits else None
+
+
+def parse_memory(text: str | None) -> int | None:
+    """'4G', '512M', '1.5GiB', '2000000000' (bytes) to bytes; None, 'none' or '0' to None (no limit)."""
+    if text is None or text.strip().lower() in ("none", "0", ""):
+        return None
+    units = {"": 1, "k": 1 << 10, "m": 1 << 20, "g": 1 << 30, "t": 1 << 40}
+    number = text.strip().lower().removesuffix("ib").removesuffix("b")
+    unit = number[-1] if number[-1:].isalpha() else ""
+    try:
+        value = float(number[:-1] if unit else number) * units[unit]
+    except (KeyError, ValueError):
+        raise ValueError(f"a memory size looks like 4G, 512M or a number of bytes, got {text!r}") from None
+    if value <= 0:
+        raise ValueError(f"a memory size must be positive, got {text!r}")
+    return int(value)
 
 
 @contextlib.contextmanager

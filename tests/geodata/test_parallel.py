@@ -111,3 +111,123 @@ def test_library_warnings_go_to_the_log_file_only(tmp_path, capfd):
     assert "RuntimeWarning: x" in text and "ok a a.obj" in text
     err = capfd.readouterr().err
     assert "ok a a.obj" in err and "RuntimeWarning" not in err
+
+
+# -- a per-mesh memory limit -------------------------------------------------------------------------
+def _data_size() -> int:
+    """This process's data size (VmData: heap and private anonymous mappings), what RLIMIT_DATA counts."""
+    with open("/proc/self/status") as f:
+        return next(int(line.split()[1]) << 10 for line in f if line.startswith("VmData:"))
+
+
+def _allocate(nbytes):
+    current_stage("remesh")
+    return int(np.ones(nbytes // 8).sum())  # every page written
+
+
+def _abort():
+    current_stage("geodesic")
+    os.abort()  # how native code ends on an uncaught std::bad_alloc
+
+
+def _exact_solver(vertices, faces):
+    from geodata._exact_geodesic import Surface  # imported by the parent first: no allocation here
+
+    current_stage("geodesic")
+    return Surface(vertices, faces).distances(np.arange(len(vertices), dtype=np.int64)).shape
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/status"), reason="RLIMIT_DATA counts mappings on Linux only")
+def test_a_mesh_over_its_memory_limit_fails_as_out_of_memory_and_the_parent_lives_on():
+    import resource
+
+    before = resource.getrlimit(resource.RLIMIT_DATA)
+    limit = _data_size() + (256 << 20)  # what the fork inherits, and 256 MiB more
+    assert run_isolated(_allocate, 64 << 20, max_memory=limit) == 8 << 20  # under it: as without a limit
+    with pytest.raises(MeshError) as info:
+        run_isolated(_allocate, 1 << 30, max_memory=limit)
+    assert info.value.stage == "remesh"
+    assert info.value.reason == f"out of memory: over the --max-memory limit of {limit / 2 ** 30:.3g} GiB"
+    # the exact solver's own std::bad_alloc (pybind11 raises MemoryError): 2,562 sources x 2,562 vertices
+    # are 52 MB of distances; with 16 MiB more than the fork's, out of memory (64 MiB: enough, measured)
+    import trimesh
+    from geodata._exact_geodesic import Surface  # noqa: F401 (loaded here, before the fork)
+
+    sphere = trimesh.creation.icosphere(4)
+    mesh = np.asarray(sphere.vertices, np.float64), np.asarray(sphere.faces, np.int32)
+    with pytest.raises(MeshError, match="^geodesic: out of memory: over the --max-memory limit"):
+        run_isolated(_exact_solver, *mesh, max_memory=_data_size() + (16 << 20))
+    assert run_isolated(_exact_solver, *mesh) == (2562, 2562)
+    assert resource.getrlimit(resource.RLIMIT_DATA) == before  # the limit was the child's alone
+    assert run_isolated(_allocate, 1 << 30) == 1 << 27  # and no later child inherits it
+
+
+def test_a_native_abort_under_a_limit_is_reported_as_out_of_memory():
+    with pytest.raises(MeshError) as info:
+        run_isolated(_abort, max_memory=3 << 30)
+    assert info.value.stage == "geodesic"
+    assert info.value.reason == "out of memory: over the --max-memory limit of 3 GiB (native abort, SIGABRT)"
+    with pytest.raises(MeshError) as info:
+        run_isolated(_abort)  # no limit: a crash like any other
+    assert info.value.reason == "native crash (SIGABRT) in the worker process"
+    with pytest.raises(MeshError) as info:
+        run_isolated(_segfault, max_memory=3 << 30)  # another signal: a crash, the limit named beside it
+    assert info.value.reason == "native crash (SIGSEGV) in the worker process, under a --max-memory limit of 3 GiB"
+
+
+MB = 1 << 20
+
+
+@pytest.mark.parametrize("env, expected", [
+    ({"SLURM_MEM_PER_CPU": "4000", "SLURM_CPUS_PER_TASK": "8", "SLURM_MEM_PER_NODE": "1"}, 32000 * MB),
+    ({"SLURM_MEM_PER_CPU": "4000"}, 4000 * MB),  # one CPU per task unless told
+    ({"SLURM_MEM_PER_NODE": "64000"}, 64000 * MB),
+])
+def test_the_default_limit_is_the_slurm_allocation_over_the_jobs(monkeypatch, env, expected):
+    from geodata.parallel import default_max_memory
+
+    for name in ("SLURM_MEM_PER_CPU", "SLURM_CPUS_PER_TASK", "SLURM_MEM_PER_NODE"):
+        monkeypatch.delenv(name, raising=False)
+    for name, value in env.items():
+        monkeypatch.setenv(name, value)
+    assert default_max_memory(4) == int(expected * 0.9) // 4
+    assert default_max_memory(1, fraction=1.0) == expected
+
+
+def test_without_slurm_the_default_is_the_cgroup_limit_else_the_machine(monkeypatch, tmp_path):
+    import geodata.parallel as parallel
+
+    for name in ("SLURM_MEM_PER_CPU", "SLURM_CPUS_PER_TASK", "SLURM_MEM_PER_NODE"):
+        monkeypatch.delenv(name, raising=False)
+    # cgroup v2: the lowest memory.max on the path; "max" is none
+    (tmp_path / "v2" / "job" / "step").mkdir(parents=True)
+    (tmp_path / "v2" / "job" / "memory.max").write_text(f"{6 << 30}\n")
+    (tmp_path / "v2" / "job" / "step" / "memory.max").write_text("max\n")
+    (tmp_path / "v2.cgroup").write_text("0::/job/step\n")
+    assert parallel._cgroup_memory(str(tmp_path / "v2.cgroup"), str(tmp_path / "v2")) == 6 << 30
+    # cgroup v1: the memory controller's tree; 2^63 rounded to pages is none
+    (tmp_path / "v1" / "memory" / "slurm" / "job").mkdir(parents=True)
+    (tmp_path / "v1" / "memory" / "slurm" / "memory.limit_in_bytes").write_text("9223372036854771712\n")
+    (tmp_path / "v1" / "memory" / "slurm" / "job" / "memory.limit_in_bytes").write_text(f"{3 << 30}\n")
+    (tmp_path / "v1.cgroup").write_text("5:cpu,cpuacct:/slurm/job\n4:memory:/slurm/job\n0::/\n")
+    assert parallel._cgroup_memory(str(tmp_path / "v1.cgroup"), str(tmp_path / "v1")) == 3 << 30
+    (tmp_path / "v1" / "memory" / "slurm" / "job" / "memory.limit_in_bytes").write_text("9223372036854771712\n")
+    assert parallel._cgroup_memory(str(tmp_path / "v1.cgroup"), str(tmp_path / "v1")) is None
+
+    monkeypatch.setattr(parallel, "_cgroup_memory", lambda: 6 << 30)
+    assert parallel.default_max_memory(3) == int((6 << 30) * 0.9) // 3
+    monkeypatch.setattr(parallel, "_cgroup_memory", lambda: None)
+    physical = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    assert parallel.default_max_memory(2) == int(physical * 0.9) // 2
+
+
+def test_memory_sizes_read_as_a_user_writes_them():
+    from geodata.parallel import parse_memory
+
+    assert parse_memory("4G") == parse_memory("4GiB") == parse_memory("4gb") == 4 << 30
+    assert parse_memory("512M") == 512 << 20 and parse_memory("1.5G") == 3 << 29
+    assert parse_memory("123456") == 123456
+    assert parse_memory(None) is None and parse_memory("none") is None and parse_memory("0") is None
+    for bad in ("4X", "lots", "-1G"):
+        with pytest.raises(ValueError):
+            parse_memory(bad)
