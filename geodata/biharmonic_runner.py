@@ -24,7 +24,7 @@ def _compute(mesh: Mesh, rng: np.random.Generator, config: BiharmonicConfig) -> 
     return {"pairs": pairs, "distances": distances}
 
 
-def process_biharmonic(task: tuple[str, str], out: str, config: BiharmonicConfig) -> dict:
-    """Compute and commit one mesh's biharmonic pairs, or record why not in meshes/<id>/biharmonic."""
-    return run_subgroup(task, out, "biharmonic", _compute, config, {"pairs_requested": config.pairs,
+def process_biharmonic(mesh_id: str, out: str, config: BiharmonicConfig) -> dict:
+    """Compute and commit one mesh's biharmonic pairs, or record why not as failed/<id>.biharmonic."""
+    return run_subgroup(mesh_id, out, "biharmonic", _compute, config, {"pairs_requested": config.pairs,
                                                                     "seed": config.seed})

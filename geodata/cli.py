@@ -1,6 +1,7 @@
 """The `geodata` command line: prepare, biharmonic, info."""
 from __future__ import annotations
 
+import contextlib
 import logging
 import sys
 from collections import defaultdict
@@ -71,6 +72,11 @@ def _scale_options(fn):
     return fn
 
 
+CHECK_OPTION = click.option(
+    "--check", is_flag=True,
+    help="Do no work: print this shard's counts and exit 0 when every one of its inputs is accounted for "
+         "(published, a byte copy of a published one, or a recorded failure), 3 while some are pending "
+         "(what a scheduler's recovery asks before releasing the next stage).")
 TIMEOUT_OPTION = click.option("--timeout", default=1800.0, show_default=True,
                               help="Seconds one mesh may take before it counts as failed.")
 
@@ -123,10 +129,11 @@ def main():
 @click.option("--retry-failed", is_flag=True, help="Try again the meshes recorded under failed/.")
 @click.option("--strict", is_flag=True, help="Exit with status 1 when any mesh of this run failed (default: 0, "
                                              "a batch that recorded its failures did its job).")
+@CHECK_OPTION
 @_list_options
 @_scale_options
 def prepare(raw_dir, out, pairs, target_vertices, collapse, seed, geodesic_backend, timeout, n_points, retry_failed,
-            strict, include, exclude, jobs, backend, scheduler, shard, log_file):
+            strict, check, include, exclude, jobs, backend, scheduler, shard, log_file):
     """Prepare every mesh file under RAW_DIR (OBJ/OFF/PLY/STL/GLB, searched recursively) into store OUT.
 
     Stages: load, watertight (manifold3d), isotropic remesh (pymeshlab), QEM edge collapse,
@@ -136,29 +143,47 @@ def prepare(raw_dir, out, pairs, target_vertices, collapse, seed, geodesic_backe
     --strict for 1). Several RAW_DIRs may be prepared into one store (same options): ids come from
     file contents.
     """
-    from geodata.prepare import PrepareConfig, process_task, select_tasks
+    from geodata.prepare import PrepareConfig, plan_shard, process_task
 
     _setup_logging(log_file)
     config = PrepareConfig(pairs, target_vertices, collapse, seed, geodesic_backend, timeout)
     try:
-        store.create_store(out, config.store_params())
+        if not check:
+            store.create_store(out, config.store_params())
+        elif Path(out).exists():  # (no store yet: every input is pending)
+            store.open_store(out)
     except store.StoreError as exc:
         raise click.ClickException(str(exc)) from None
     except OSError as exc:  # a parent that is a file, no permission, a full disk...
         raise click.ClickException(f"{out}: cannot create the store: {exc.strerror or exc}") from None
-    tasks, n_done, n_failed = select_tasks(raw_dir, out, shard, retry_failed, include, exclude)
-    log.info("prepare %s -> %s: %d to do, %d already committed, %d failed before%s", raw_dir, out, len(tasks),
-             n_done, n_failed, "" if shard == (0, 1) else f" (shard {shard[0]}/{shard[1]})")
+    plan = plan_shard(raw_dir, out, shard, include, exclude)
+    tasks = plan.pending(retry_failed)
+    where = "" if shard == (0, 1) else f" (shard {shard[0]}/{shard[1]})"
+    counts = (f"{len(plan.ledger['inputs'])} input files, {len(plan.tasks)} distinct, {len(plan.published)} "
+              f"published, {len(plan.failed - plan.published)} failed, {len(plan.pending())} pending{where}")
+    if check:
+        _exit_check(f"prepare {raw_dir} -> {out}: {counts}", len(plan.pending()))
+    store.write_ledger(out, plan.ledger_name, plan.ledger)  # every input accounted for before any work
+    log.info("prepare %s -> %s: %s; %d to do", raw_dir, out, counts, len(tasks))
     rows = _run(partial(process_task, out=out, config=config), tasks, "prepare", jobs, backend, scheduler)
-    _summary(rows, n_done, n_failed)
+    _summary(rows, len(plan.published), 0 if retry_failed else len(plan.failed - plan.published))
     if n_points:
         from geodata.points_runner import PointsConfig, process_points
         rows += _add_subgroup(out, "points", process_points, PointsConfig(n_points, pairs, seed, timeout),
-                              retry_failed, jobs, backend, scheduler, shard, log_file)
+                              retry_failed, False, jobs, backend, scheduler, shard, log_file)
     failed = sum(r["status"] != "ok" for r in rows)
     if strict and failed:
         raise click.ClickException(f"--strict: {failed} of {len(rows)} meshes failed (listed above and in "
                                    f"{out}/failed)")
+
+
+CHECK_PENDING = 3  # the exit status of --check while some of the shard's work is pending
+
+
+def _exit_check(line: str, n_pending: int) -> None:
+    """--check: print the counts and exit 0 when nothing is pending, else CHECK_PENDING."""
+    click.echo(line)
+    sys.exit(CHECK_PENDING if n_pending else 0)
 
 
 def _run(fn, tasks, what, jobs, backend, scheduler) -> list[dict]:
@@ -210,8 +235,9 @@ def _summary(rows: list[dict], n_done: int, n_failed: int) -> None:
 @click.option("--seed", default=0, show_default=True, help="Seed of the pair sampling (per mesh: seed + mesh id).")
 @TIMEOUT_OPTION
 @click.option("--retry-failed", is_flag=True, help="Try again the meshes whose biharmonic step failed.")
+@CHECK_OPTION
 @_scale_options
-def biharmonic(out, pairs, seed, timeout, retry_failed, **scale):
+def biharmonic(out, pairs, seed, timeout, retry_failed, check, **scale):
     """Add exact biharmonic distances to every committed mesh of store OUT.
 
     Distances follow Lipman, Rustamov and Funkhouser (2010) with libigl's cotangent Laplacian and
@@ -220,20 +246,25 @@ def biharmonic(out, pairs, seed, timeout, retry_failed, **scale):
     """
     from geodata.biharmonic_runner import BiharmonicConfig, process_biharmonic
 
-    _add_subgroup(out, "biharmonic", process_biharmonic, BiharmonicConfig(pairs, seed, timeout), retry_failed, **scale)
+    _add_subgroup(out, "biharmonic", process_biharmonic, BiharmonicConfig(pairs, seed, timeout), retry_failed, check,
+                  **scale)
 
 
-def _add_subgroup(out, subgroup, process, config, retry_failed, jobs, backend, scheduler, shard,
+def _add_subgroup(out, subgroup, process, config, retry_failed, check, jobs, backend, scheduler, shard,
                   log_file) -> list[dict]:
-    """Run ``process`` on this shard's committed meshes still without ``subgroup``, with a summary; the
-    rows of this run."""
+    """Run ``process`` on this shard's published meshes still without ``subgroup``, with a summary; the
+    rows of this run. ``check``: print the counts and exit (:func:`_exit_check`) instead."""
     _setup_logging(log_file)
     try:
         store.open_store(out)
     except store.StoreError as exc:
         raise click.ClickException(str(exc)) from None
     tasks, n_done, n_failed = pending(out, subgroup, partial(in_shard, shard=shard), retry_failed)
-    log.info("%s %s: %d to do, %d already done, %d failed before", subgroup, out, len(tasks), n_done, n_failed)
+    where = "" if shard == (0, 1) else f" (shard {shard[0]}/{shard[1]})"
+    if check:
+        _exit_check(f"{subgroup} {out}: {n_done} done, {n_failed} failed, {len(tasks)} pending{where}", len(tasks))
+    log.info("%s %s: %d to do, %d already done, %d failed before%s", subgroup, out, len(tasks), n_done, n_failed,
+             where)
     rows = _run(partial(process, out=out, config=config), tasks, subgroup, jobs, backend, scheduler)
     _summary(rows, n_done, n_failed)
     return rows
@@ -248,8 +279,9 @@ def _add_subgroup(out, subgroup, process, config, retry_failed, jobs, backend, s
 @click.option("--seed", default=0, show_default=True, help="Seed of the points and sources (per mesh: seed + mesh id).")
 @TIMEOUT_OPTION
 @click.option("--retry-failed", is_flag=True, help="Try again the meshes whose points step failed.")
+@CHECK_OPTION
 @_scale_options
-def points(out, n_points, pairs, seed, timeout, retry_failed, **scale):
+def points(out, n_points, pairs, seed, timeout, retry_failed, check, **scale):
     """Add surface points with exact geodesic distances between them to every committed mesh of store OUT
     (the data of point-cloud models).
 
@@ -260,7 +292,8 @@ def points(out, n_points, pairs, seed, timeout, retry_failed, **scale):
     """
     from geodata.points_runner import PointsConfig, process_points
 
-    _add_subgroup(out, "points", process_points, PointsConfig(n_points, pairs, seed, timeout), retry_failed, **scale)
+    _add_subgroup(out, "points", process_points, PointsConfig(n_points, pairs, seed, timeout), retry_failed, check,
+                  **scale)
 
 
 @main.command()
@@ -315,38 +348,104 @@ def examples(out_dir):
 
 @main.command()
 @click.argument("out", type=click.Path(exists=True))
-def info(out):
-    """Counts, failures, sizes and stage timings of store OUT."""
+@click.option("--csv", "csv_file", type=click.Path(dir_okay=False, allow_dash=True), default=None,
+              help="Also write one row per input file: source, sha256, mesh_id, fate (ok, duplicate, failed, "
+                   "pending), detail (the mesh it duplicates, or the failed stage and reason); '-': the table "
+                   "alone, on stdout.")
+def info(out, csv_file):
+    """Inputs and their fates, counts, failures, sizes and stage timings of store OUT.
+
+    Every input file any `geodata prepare` run found is accounted for: ok (its mesh), duplicate (a byte copy
+    of another input's mesh), failed (stage and reason), or pending (not done yet: a run is at work, or
+    was killed)."""
     try:
         root = store.open_store(out)
     except store.StoreError as exc:
         raise click.ClickException(str(exc)) from None
     meshes = store.list_meshes(out)
     failures = store.list_failures(out)
-    ok = {k: a for k, a in meshes.items() if a and a.get("status") == "ok"}
-    incomplete = sorted(set(meshes) - set(ok))
-    bh = [store.mesh_status(out, f"{k}/biharmonic") for k in ok]
+    attrs = _read_attrs(out, meshes)
+    inputs = fates(store.read_ledgers(out), meshes, attrs, failures)
+    if csv_file == "-":  # the table alone, for a pipe
+        _write_csv(csv_file, inputs)
+        return
+    by_fate = defaultdict(int)
+    for row in inputs:
+        by_fate[row["fate"]] += 1
+    subs = {sub: sum(sub in s for s in meshes.values()) for sub in store.SUBGROUPS}
+    sub_failed = {sub: sum(name.endswith(f".{sub}") for name in failures) for sub in store.SUBGROUPS}
+    mesh_failures = {k: a for k, a in failures.items() if not k.endswith(tuple(f".{s}" for s in store.SUBGROUPS))}
     click.echo(f"store {out}  (format {root.attrs['geodata_format']}, params {root.attrs.get('params')})")
-    click.echo(f"meshes: {len(ok)} ok, {len(failures)} failed, {len(incomplete)} incomplete; "
-               f"biharmonic: {bh.count('ok')} ok, {bh.count('failed')} failed")
-    if ok:
-        nv = np.array([a["n_vertices"] for a in ok.values()])
-        npairs = np.array([a["n_pairs"] for a in ok.values()])
+    click.echo(f"inputs: {len(inputs)} files: {by_fate['ok']} ok, {by_fate['duplicate']} duplicate, "
+               f"{by_fate['failed']} failed, {by_fate['pending']} pending")
+    click.echo(f"meshes: {len(meshes)} published, {len(mesh_failures)} failed; "
+               + ", ".join(f"{sub}: {subs[sub]} ok, {sub_failed[sub]} failed" for sub in store.SUBGROUPS))
+    if attrs:
+        nv = np.array([a["n_vertices"] for a in attrs.values()])
+        npairs = np.array([a["n_pairs"] for a in attrs.values()])
         click.echo(f"vertices per mesh: min {nv.min()}, mean {nv.mean():.0f}, max {nv.max()}; "
                    f"geodesic pairs: {npairs.sum():,} in all")
-        click.echo(_stage_seconds([a.get("timings", {}) for a in ok.values()]))
+        click.echo(_stage_seconds([a.get("timings", {}) for a in attrs.values()]))
     click.echo(f"size on disk: {_du(out) / 2**20:.1f} MiB")
-    noted = {a.get("source"): a["warnings"] for a in ok.values() if a.get("warnings")}
+    leftovers = store.temporary_files(out)
+    if leftovers:
+        click.echo(f"temporary files in meshes/: {len(leftovers)} (writers at work, or killed runs' leftovers: "
+                   f"safe to delete while no run writes this store)")
+    noted = {a.get("source"): a["warnings"] for a in attrs.values() if a.get("warnings")}
     if noted:
         click.echo("ok, with warnings:")
         for source, notes in sorted(noted.items()):
             click.echo(f"  {source}  " + "; ".join(notes))
-    if incomplete:
-        click.echo("incomplete (redone by the next run): " + ", ".join(incomplete))
     if failures:
         click.echo("failed:")
-        for mesh_id, a in sorted(failures.items(), key=lambda kv: kv[1].get("source", "")):
-            click.echo(f"  {a.get('source')}  [{a.get('stage')}]  {a.get('error')}")
+        for name, a in sorted(failures.items(), key=lambda kv: (kv[1].get("source", ""), kv[0])):
+            sub = next((f" ({s})" for s in store.SUBGROUPS if name.endswith(f".{s}")), "")
+            click.echo(f"  {a.get('source')}{sub}  [{a.get('stage')}]  {a.get('error')}")
+    if csv_file:
+        _write_csv(csv_file, inputs)
+
+
+def _read_attrs(out, meshes: dict) -> dict[str, dict]:
+    """Every published mesh's attributes (a few threads: each is one small read from its zip)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(8) as pool:
+        found = dict(zip(meshes, pool.map(lambda m: store.mesh_attrs(out, m), meshes)))
+    return {k: a for k, a in found.items() if a is not None}
+
+
+def fates(ledgers: dict, meshes: dict, attrs: dict, failures: dict) -> list[dict]:
+    """The fate of every input file in the runs' ledgers: ok (the source its published mesh records),
+    duplicate (a byte copy of the same file name: the mesh records another source), failed (the mesh's
+    failure record), pending. A byte copy under another file name is a mesh of its own: its detail says so."""
+    published_as = defaultdict(set)  # byte copies under another file name are meshes of their own
+    for entry in ledgers.values():
+        if entry["mesh_id"] in meshes:
+            published_as[entry["sha256"]].add(entry["mesh_id"])
+    rows = []
+    for (root, source), entry in sorted(ledgers.items(), key=lambda kv: kv[0][1]):
+        mesh_id = entry["mesh_id"]
+        row = {"source": source, "sha256": entry["sha256"], "mesh_id": mesh_id, "fate": "pending", "detail": ""}
+        if mesh_id in meshes:
+            owner = attrs.get(mesh_id, {}).get("source")
+            if owner != source:
+                row.update(fate="duplicate", detail=f"duplicate of {mesh_id} ({owner})")
+            else:
+                others = sorted(published_as[entry["sha256"]] - {mesh_id})
+                row.update(fate="ok", detail=f"same bytes as {', '.join(others)}" if others else "")
+        elif mesh_id in failures:
+            row.update(fate="failed", detail=f"[{failures[mesh_id].get('stage')}] {failures[mesh_id].get('error')}")
+        rows.append(row)
+    return rows
+
+
+def _write_csv(path: str, rows: list[dict]) -> None:
+    import csv
+
+    with contextlib.nullcontext(sys.stdout) if path == "-" else open(path, "w", newline="") as f:
+        writer = csv.DictWriter(f, ["source", "sha256", "mesh_id", "fate", "detail"])
+        writer.writeheader()
+        writer.writerows(rows)
 
 
 def _du(path) -> int:

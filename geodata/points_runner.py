@@ -31,7 +31,7 @@ def _compute(mesh: Mesh, rng: np.random.Generator, config: PointsConfig) -> dict
             "pairs": pairs.astype(np.uint32), "distances": distances}
 
 
-def process_points(task: tuple[str, str], out: str, config: PointsConfig) -> dict:
-    """Compute and commit one mesh's points and their pairs, or record why not in meshes/<id>/points."""
-    return run_subgroup(task, out, "points", _compute, config, {"points": config.points,
+def process_points(mesh_id: str, out: str, config: PointsConfig) -> dict:
+    """Compute and commit one mesh's points and their pairs, or record why not as failed/<id>.points."""
+    return run_subgroup(mesh_id, out, "points", _compute, config, {"points": config.points,
                                                                 "pairs_requested": config.pairs, "seed": config.seed})

@@ -6,11 +6,14 @@ invariants between them and touches files and the store.
 from __future__ import annotations
 
 import hashlib
+import contextlib
 import importlib.metadata
+import json
 import re
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -19,12 +22,14 @@ from geodata.geodesic import exact_geodesic_pairs
 from geodata.mesh import Mesh, MeshError, one_line, require_closed_manifold, unique_edges, vertex_normals
 from geodata.parallel import current_stage, in_shard, run_isolated
 from geodata.stages.load import MESH_SUFFIXES, load_mesh_bytes
-from geodata.stages.normalize import normalize
+from geodata.stages.normalize import normalization, normalize
 from geodata.stages.remesh import remesh, simplify
 from geodata.stages.watertight import watertight
+from geodata.surface_points import SurfacePoints, locate_points
 
 __all__ = ["PrepareConfig", "MeshTask", "raw_root", "discover", "read_list", "make_tasks", "mesh_rng", "run_stage",
-           "prepare_geometry", "prepare_mesh", "process_task"]
+           "prepare_geometry", "Prepared", "prepare_mesh", "input_places", "process_task", "ShardPlan",
+           "plan_shard"]
 
 LIBRARIES = ("geogegnn", "trimesh", "manifold3d", "pymeshlab", "fast-simplification", "tvb-gdist", "libigl", "numpy")
 
@@ -48,7 +53,8 @@ class MeshTask:
     path: str      # absolute path of the raw file
     source: str    # path relative to the input root (as recorded in the store)
     mesh_id: str
-    sha256: str
+    sha256: str | None  # None: the file could not be read (``error`` says why)
+    error: str | None = None
 
 
 def raw_root(raw_dir: str | Path) -> Path:
@@ -75,17 +81,42 @@ def read_list(path: str | Path) -> set[str]:
     return {line for line in lines if line}
 
 
-def make_tasks(raw_dir: str | Path, sources: list[str]) -> list[MeshTask]:
-    """Tasks with ids `<safe stem>-<8 hex of the content hash>`; identical files collapse to one task."""
+ID_DIGITS = 32  # hex digits of the SHA-256 in a mesh id: 128 bits, no collision among any real catalog
+
+
+def mesh_id_of(source: str, digest: str) -> str:
+    """``<safe stem>-<32 hex digits of the content hash>``: distinct files get distinct ids at any scale
+    (ShapeNet names every file model_normalized.obj), byte copies one id, in every run, shard and job count."""
+    stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(source).stem).strip("._") or "mesh"
+    return f"{stem[:40]}-{digest[:ID_DIGITS]}"
+
+
+def make_tasks(raw_dir: str | Path, sources: list[str], known: dict | None = None) -> tuple[list[MeshTask], dict]:
+    """One task per distinct content among ``sources`` (byte copies are one task, under the first path), and the
+    ledger entry of every source: {sha256, mesh_id, size, mtime_ns}. ``known``: an earlier ledger's entries,
+    whose hash is reused where a file's size and modification time are unchanged (a rerun reads no file
+    again). A file that cannot be read is a task with its reason in ``error``."""
     base = raw_root(raw_dir)
     tasks: dict[str, MeshTask] = {}
+    entries = {}
     for source in sources:
         path = base / source
-        digest = hashlib.sha256(path.read_bytes()).hexdigest()
-        stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(source).stem).strip("._") or "mesh"
-        mesh_id = f"{stem[:64]}-{digest[:8]}"
-        tasks.setdefault(mesh_id, MeshTask(str(path.resolve()), source, mesh_id, digest))
-    return list(tasks.values())
+        try:
+            stat = path.stat()
+            old = (known or {}).get(source)
+            if old and (old["size"], old["mtime_ns"]) == (stat.st_size, stat.st_mtime_ns) and old["sha256"]:
+                digest = old["sha256"]
+            else:
+                digest = hashlib.sha256(path.read_bytes()).hexdigest()
+            task = MeshTask(str(path.resolve()), source, mesh_id_of(source, digest), digest)
+            entries[source] = {"sha256": digest, "mesh_id": task.mesh_id, "size": stat.st_size,
+                               "mtime_ns": stat.st_mtime_ns}
+        except OSError as exc:  # permissions, a broken link, a file removed since the listing
+            unreadable = mesh_id_of(source, hashlib.sha256(f"unreadable:{source}".encode()).hexdigest())
+            task = MeshTask(str(path), source, unreadable, None, f"cannot read the file: {exc.strerror or exc}")
+            entries[source] = {"sha256": None, "mesh_id": unreadable, "size": None, "mtime_ns": None}
+        tasks.setdefault(task.mesh_id, task)
+    return list(tasks.values()), entries
 
 
 def mesh_rng(seed: int, mesh_id: str) -> np.random.Generator:
@@ -111,12 +142,16 @@ def run_stage(timings: dict, stage: str, fn, *args, check: bool = True, zero_are
     return result
 
 
-def prepare_geometry(mesh: Mesh, config: PrepareConfig, timings: dict | None = None) -> Mesh:
-    """The geometry stages on a loaded mesh: watertight, remesh, simplify, normalize."""
+def prepare_geometry(mesh: Mesh, config: PrepareConfig, timings: dict | None = None,
+                     transform: list | None = None) -> Mesh:
+    """The geometry stages on a loaded mesh: watertight, remesh, simplify, normalize; ``transform`` gets the
+    normalization's (center, scale): a point p of the input lies at (p - center) / scale in the result's units."""
     timings = {} if timings is None else timings
     mesh = run_stage(timings, "watertight", watertight, mesh, zero_area_ok=True)  # remesh rebuilds triangles
     mesh = run_stage(timings, "remesh", lambda m: remesh(m, config.target_vertices, collapse=config.collapse), mesh)
     mesh = run_stage(timings, "simplify", simplify, mesh, config.collapse)
+    if transform is not None:
+        transform.extend(normalization(mesh.vertices))
     return run_stage(timings, "normalize", normalize, mesh)
 
 
@@ -134,19 +169,54 @@ def input_notes(mesh: Mesh) -> list[str]:
     return []
 
 
+class Prepared(NamedTuple):
+    """One file through every stage: the stored mesh, its geodesic pairs and distances, the sources the solver
+    skipped, where each of the file's vertices lies on the mesh (:func:`input_places`), and the normalization
+    (a point p of the input is at (p - center) / scale on the mesh: distances in input units are the stored
+    ones times ``scale``)."""
+
+    mesh: Mesh
+    pairs: np.ndarray
+    distances: np.ndarray
+    skipped: np.ndarray
+    places: SurfacePoints
+    center: np.ndarray
+    scale: float
+
+
 def prepare_mesh(data: bytes, suffix: str, config: PrepareConfig, rng: np.random.Generator,
-                 timings: dict | None = None, notes: list | None = None
-                 ) -> tuple[Mesh, np.ndarray, np.ndarray, np.ndarray]:
-    """All stages on one file's bytes: the normalized mesh, its geodesic pairs, distances, skipped
-    sources; ``notes`` gets :func:`input_notes` of the loaded input."""
+                 timings: dict | None = None, notes: list | None = None) -> Prepared:
+    """All stages on one file's bytes; ``notes`` gets :func:`input_notes` of the loaded input."""
     timings = {} if timings is None else timings
-    mesh = run_stage(timings, "load", load_mesh_bytes, data, suffix, check=False)
+    mesh, index_map = run_stage(timings, "load", load_mesh_bytes, data, suffix, True, check=False)
     if notes is not None:
         notes.extend(input_notes(mesh))
-    mesh = prepare_geometry(mesh, config, timings)
-    pairs, distances, skipped = run_stage(timings, "geodesic", exact_geodesic_pairs, mesh, config.pairs, rng,
+    transform: list = []
+    stored = prepare_geometry(mesh, config, timings, transform)
+    pairs, distances, skipped = run_stage(timings, "geodesic", exact_geodesic_pairs, stored, config.pairs, rng,
                                           config.geodesic_backend, check=False)
-    return mesh, pairs, distances, skipped
+    return Prepared(stored, pairs, distances, skipped, input_places(mesh.vertices, index_map, stored, *transform),
+                    *transform)
+
+
+def input_places(loaded: np.ndarray, index_map: np.ndarray, stored: Mesh, center: np.ndarray,
+                 scale: float) -> SurfacePoints:
+    """Where each vertex of the input file lies on the stored surface: the closest point to its position
+    mapped by the normalization, (p - center) / scale, as a face and barycentric coordinates, and its offset
+    (the distance to the surface, in the stored units: what watertight, remesh and simplify moved).
+
+    Args:
+        loaded: the loaded mesh's vertices (M, 3), input units.
+        index_map: (V,) for each vertex of the file its row in ``loaded``, -1 where the load stage dropped it
+            (no face uses it): such a vertex gets face -1, barycentric (0, 0, 0) and offset NaN.
+    """
+    places = locate_points(stored, (loaded - center) / scale)
+    used = index_map >= 0
+    face = np.full(len(index_map), -1, dtype=np.int64)
+    bary = np.zeros((len(index_map), 3))
+    offset = np.full(len(index_map), np.nan)
+    face[used], bary[used], offset[used] = (a[index_map[used]] for a in places)
+    return SurfacePoints(face, bary, offset)
 
 
 def _compute(task: MeshTask, config: PrepareConfig) -> tuple[dict, dict]:
@@ -155,17 +225,21 @@ def _compute(task: MeshTask, config: PrepareConfig) -> tuple[dict, dict]:
     data = Path(task.path).read_bytes()
     timings: dict = {}
     notes: list = []
-    mesh, pairs, distances, skipped = prepare_mesh(data, Path(task.path).suffix, config,
-                                                   mesh_rng(config.seed, task.mesh_id), timings, notes)
+    done = prepare_mesh(data, Path(task.path).suffix, config, mesh_rng(config.seed, task.mesh_id), timings, notes)
     arrays = {
-        "vertices": mesh.vertices.astype(np.float32),
-        "faces": mesh.faces.astype(np.int32),
-        "normals": vertex_normals(mesh).astype(np.float32),
-        "edges": unique_edges(mesh.faces).astype(np.int32),
-        "geodesic/pairs": pairs,
-        "geodesic/distances": distances,
+        "vertices": done.mesh.vertices.astype(np.float32),
+        "faces": done.mesh.faces.astype(np.int32),
+        "normals": vertex_normals(done.mesh).astype(np.float32),
+        "edges": unique_edges(done.mesh.faces).astype(np.int32),
+        "geodesic/pairs": done.pairs,
+        "geodesic/distances": done.distances,
+        "input/face": done.places.face.astype(np.int32),
+        "input/bary": done.places.bary.astype(np.float32),
+        "input/offset": done.places.offset.astype(np.float32),
     }
-    return arrays, {"timings": timings, "skipped_sources": skipped.tolist(), "warnings": notes}
+    return arrays, {"timings": timings, "skipped_sources": done.skipped.tolist(), "warnings": notes,
+                    "geometry_key": store.geometry_key(arrays["vertices"], done.mesh.faces),
+                    "normalization": {"center": done.center.tolist(), "scale": done.scale}}
 
 
 def library_versions() -> dict:
@@ -179,33 +253,64 @@ def library_versions() -> dict:
 
 
 def process_task(task: MeshTask, out: str, config: PrepareConfig) -> dict:
-    """Prepare one mesh and commit it (or record its failure). Returns a summary row; never raises MeshError."""
+    """Prepare one mesh and publish it (or record its failure). Returns a summary row; never raises MeshError."""
     start = time.perf_counter()
     row = {"mesh_id": task.mesh_id, "source": task.source, "warnings": []}
     try:
+        if task.error:
+            raise MeshError("load", task.error)
         arrays, computed = run_isolated(_compute, task, config, timeout=config.timeout,
                                         warnings_out=row["warnings"])
     except MeshError as exc:
         store.record_failure(out, task.mesh_id, task.source, exc.stage, exc.reason)
-        store.remove_mesh(out, task.mesh_id)
         return {**row, "status": "failed", "stage": exc.stage, "error": exc.reason,
                 "seconds": time.perf_counter() - start}
     attrs = {"source": task.source, "sha256": task.sha256, "params": config.store_params(), **computed,
              "n_vertices": len(arrays["vertices"]), "n_faces": len(arrays["faces"]),
              "n_pairs": len(arrays["geodesic/pairs"]), "versions": library_versions()}
-    store.write_group(out, f"meshes/{task.mesh_id}", arrays, attrs)
-    store.commit(out, f"meshes/{task.mesh_id}")
+    if not store.write_mesh(out, task.mesh_id, arrays, attrs):  # a byte copy in another shard was first
+        computed["warnings"] = [*computed["warnings"], "already published by another run (a byte copy of this file)"]
     store.clear_failure(out, task.mesh_id)
     return {**row, "status": "ok", "timings": computed["timings"], "n_vertices": attrs["n_vertices"],
             "notes": computed["warnings"], "seconds": time.perf_counter() - start}
 
 
-def select_tasks(raw_dir: str | Path, out: str, shard: tuple[int, int], retry_failed: bool,
-                 include: set[str] | None = None, exclude: set[str] | None = None
-                 ) -> tuple[list[MeshTask], int, int]:
-    """This shard's tasks that still need work, and how many were already committed or failed."""
-    tasks = make_tasks(raw_dir, [s for s in discover(raw_dir, include, exclude) if in_shard(s, shard)])
-    failed = set() if retry_failed else set(store.list_failures(out))
-    done = {t.mesh_id for t in tasks if store.mesh_status(out, t.mesh_id) == "ok"}
-    pending = [t for t in tasks if t.mesh_id not in done and t.mesh_id not in failed]
-    return pending, len(done), sum(t.mesh_id in failed for t in tasks)
+@dataclass
+class ShardPlan:
+    """What one shard of a prepare run finds: its distinct inputs and their state in the store."""
+
+    tasks: list[MeshTask]      # one per distinct content among the shard's files
+    ledger: dict               # sources/<ledger_name>.json: every file of the shard -> sha256, mesh id
+    ledger_name: str
+    published: set[str]        # ids among ``tasks`` already in the store
+    failed: set[str]           # ids among ``tasks`` with a failure record
+
+    def pending(self, retry_failed: bool = False) -> list[MeshTask]:
+        """The tasks still to do (with ``retry_failed``, the failed ones too)."""
+        return [t for t in self.tasks if t.mesh_id not in self.published
+                and (retry_failed or t.mesh_id not in self.failed)]
+
+
+def ledger_name(raw_dir: str | Path, shard: tuple[int, int], include: set[str] | None,
+                exclude: set[str] | None) -> str:
+    """The name of a run's ledger: the same for a rerun of one shard of one input selection."""
+    key = json.dumps([str(raw_root(raw_dir).resolve()), list(shard), sorted(include) if include is not None
+                      else None, sorted(exclude or ())])
+    return f"shard{shard[0]}of{shard[1]}-{hashlib.sha256(key.encode()).hexdigest()[:16]}"
+
+
+def plan_shard(raw_dir: str | Path, out: str, shard: tuple[int, int], include: set[str] | None = None,
+               exclude: set[str] | None = None) -> ShardPlan:
+    """This shard's files (hashed, or their hash taken from the shard's last ledger where unchanged) and
+    the state of their meshes, from the shard's own files and records alone: its cost does not grow with the
+    store."""
+    name, known = ledger_name(raw_dir, shard, include, exclude), None
+    with contextlib.suppress(FileNotFoundError, json.JSONDecodeError, KeyError):
+        known = json.loads((Path(out) / "sources" / f"{name}.json").read_text())["inputs"]
+    tasks, entries = make_tasks(raw_dir, [s for s in discover(raw_dir, include, exclude) if in_shard(s, shard)],
+                                known)
+    ids = {t.mesh_id for t in tasks}
+    published = {m for m in ids if store.mesh_file(out, m).is_file()}
+    ledger = {"root": str(raw_root(raw_dir).resolve()), "shard": f"{shard[0]}/{shard[1]}", "written": time.time(),
+              "inputs": entries}
+    return ShardPlan(tasks, ledger, name, published, set(store.list_failures(out, ids)))

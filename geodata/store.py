@@ -1,49 +1,73 @@
-"""The zarr v3 store: one group per mesh, committed by writing its status mark last.
+"""The store: a zarr v3 root group, one zip file per mesh (a zarr group inside), published by an atomic link.
 
 Layout (a contract, docs/store.md)::
 
-    OUT/meshes/<mesh_id>/{vertices, faces, normals, edges, geodesic/{pairs,distances}, biharmonic/...}
-    OUT/failed/<mesh_id>   attrs only: source, stage, error
+    OUT/zarr.json                     root group; attrs geodata_format, params, writer
+    OUT/meshes/<mesh_id>.zip          the mesh: vertices, faces, normals, edges, geodesic/, input/
+    OUT/meshes/<mesh_id>.<sub>.zip    a later stage's subgroup (biharmonic, points)
+    OUT/failed/<name>/                attrs only: source, stage, error (name: a mesh id, or <mesh_id>.<sub>)
+    OUT/sources/<ledger>.json         what each prepare run found: source path -> sha256, mesh id
 
-Many processes may write one store at once: each writes only its own mesh groups, and the shared
-parents are created once, before any worker starts (concurrent creation races, zarr-python#1435).
+A file is written under a temporary name in its folder and published with ``os.link`` (which refuses to
+replace an existing name): a mesh exists completely or not at all, a published one is never rewritten,
+and a killed writer leaves only a temporary file. Many processes may write one store at once: each
+publishes only its own meshes, and the shared folders are made once, before any worker starts
+(concurrent zarr group creation races, zarr-python#1435). Few files per mesh (1 to 3) keep a store of
+50k meshes within the file-count quotas of HPC project spaces. Local (POSIX) filesystems only.
 """
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import json
+import os
+import socket
 import time
 from pathlib import Path
 
 import numpy as np
 import zarr
 
-__all__ = ["StoreError", "FORMAT", "create_store", "open_store", "group_attrs", "mesh_status", "write_group",
-           "commit", "record_failure", "clear_failure", "remove_mesh", "list_meshes", "list_failures"]
+__all__ = ["StoreError", "FORMAT", "SUBGROUPS", "create_store", "open_store", "geometry_key", "mesh_file", "write_mesh",
+           "read_mesh", "mesh_attrs", "list_meshes", "record_failure", "clear_failure", "list_failures",
+           "write_ledger", "read_ledgers", "temporary_files"]
 
-FORMAT = 1
+FORMAT = 2  # 1: one zarr group per mesh (~14-20 files a mesh), before 2026-11-26
+SUBGROUPS = ("biharmonic", "points")
 
 
 class StoreError(Exception):
-    """The store path is missing or is not a geodata store."""
+    """The store path is missing or is not a geodata store of this format."""
+
+
+def _check_format(out: str, root: zarr.Group) -> None:
+    found = root.attrs.get("geodata_format")
+    if found == FORMAT:
+        return
+    if isinstance(found, int) and found < FORMAT:
+        raise StoreError(f"{out} is a geodata store of format {found} (one folder per mesh); this geodata reads "
+                         f"format {FORMAT} (one zip per mesh): convert it with `geodata upgrade {out} NEW_OUT`")
+    if isinstance(found, int):
+        raise StoreError(f"{out} is a geodata store of format {found}, newer than this geodata's {FORMAT}: "
+                         f"upgrade geogegnn")
+    raise StoreError(f"{out} is not a geodata store")
 
 
 def create_store(out: str | Path, params: dict) -> zarr.Group:
-    """Open OUT for writing, creating the root, meshes/ and failed/ groups if missing.
+    """Open OUT for writing, creating the root group and the meshes/, failed/ and sources/ folders if missing.
 
     A store holds data made with one setting of `params`; a run asking for other values is refused
     rather than mixing two datasets under one name.
     """
     out = str(out)
-    root = _open_or_create_root(out, {"geodata_format": FORMAT, "params": params})
-    if root.attrs.get("geodata_format") != FORMAT:
-        raise StoreError(f"{out} is not a geodata store")
+    from geodata import __version__
+    root = _open_or_create_root(out, {"geodata_format": FORMAT, "params": params, "writer": __version__})
+    _check_format(out, root)
     if root.attrs.get("params") != params:
         diff = {k: v for k, v in root.attrs.get("params", {}).items() if params.get(k) != v}
         raise StoreError(f"{out} was made with {diff}; use another OUT for other parameters")
-    for name in ("meshes", "failed"):
-        with contextlib.suppress(zarr.errors.ContainsGroupError):  # another shard made it between check and write
-            root.require_group(name)
+    for name in ("meshes", "failed", "sources"):
+        (Path(out) / name).mkdir(exist_ok=True)
     return root
 
 
@@ -61,35 +85,27 @@ def _open_or_create_root(out: str, attrs: dict, attempts: int = 50) -> zarr.Grou
 
 
 def open_store(out: str | Path) -> zarr.Group:
-    """Open an existing store read-only; StoreError where OUT is missing or not a geodata store."""
+    """Open an existing store read-only; StoreError where OUT is missing or not a geodata store of this format."""
     try:
         root = zarr.open_group(str(out), mode="r")
     except (FileNotFoundError, zarr.errors.GroupNotFoundError):
         raise StoreError(f"{out}: no geodata store here") from None
-    if root.attrs.get("geodata_format") != FORMAT:
-        raise StoreError(f"{out} is not a geodata store")
+    _check_format(str(out), root)
     return root
 
 
-def group_attrs(out: str | Path, path: str) -> dict | None:
-    """A group's attributes, or None when the group is missing or its metadata half-written."""
-    try:
-        return dict(zarr.open_group(f"{out}/{path}", mode="r").attrs)
-    except (FileNotFoundError, zarr.errors.GroupNotFoundError, json.JSONDecodeError, ValueError, KeyError):
-        return None
+def geometry_key(vertices: np.ndarray, faces: np.ndarray) -> str:
+    """A content hash of a mesh: 24 hex digits of the SHA-256 of its float32 vertices and int64 faces.
+    Recorded at prepare time (attribute ``geometry_key``) so that readers need not read the geometry to
+    key per-mesh caches by content."""
+    h = hashlib.sha256(np.ascontiguousarray(vertices, dtype=np.float32).tobytes())
+    h.update(np.ascontiguousarray(faces, dtype=np.int64).tobytes())
+    return h.hexdigest()[:24]
 
 
-def mesh_status(out: str | Path, path: str) -> str | None:
-    """The status of meshes/<path> ("ok" once committed), or None when missing or half-written."""
-    return (group_attrs(out, f"meshes/{path}") or {}).get("status")
-
-
-def write_group(out: str | Path, path: str, arrays: dict[str, np.ndarray], attrs: dict) -> zarr.Group:
-    """(Re)create group OUT/path holding `arrays` (names may contain '/'), attrs without a commit mark."""
-    group = zarr.open_group(f"{out}/{path}", mode="w", attributes=attrs)
-    for name, data in arrays.items():
-        group.create_array(name, data=np.ascontiguousarray(data), chunks=_chunks(data))
-    return group
+def mesh_file(out: str | Path, mesh_id: str, subgroup: str | None = None) -> Path:
+    """The zip file of a mesh, meshes/<mesh_id>.zip, or of its subgroup, meshes/<mesh_id>.<subgroup>.zip."""
+    return Path(out) / "meshes" / (f"{mesh_id}.zip" if subgroup is None else f"{mesh_id}.{subgroup}.zip")
 
 
 def _chunks(data: np.ndarray) -> tuple[int, ...]:
@@ -97,44 +113,139 @@ def _chunks(data: np.ndarray) -> tuple[int, ...]:
     return (rows, *data.shape[1:])
 
 
-def commit(out: str | Path, path: str) -> None:
-    """Write the commit mark last: a reader counts the group only from now on."""
-    zarr.open_group(f"{out}/{path}", mode="r+").attrs["status"] = "ok"
+def _publish(tmp: Path, final: Path) -> bool:
+    """Give the finished file ``tmp`` its name ``final`` unless that exists; True when this call published."""
+    try:
+        os.link(tmp, final)  # atomic, and never replaces: the first writer of a name wins
+        return True
+    except FileExistsError:
+        return False
+    except OSError:  # a filesystem without hard links: rename, atomic too (but it may replace)
+        if final.exists():
+            return False
+        os.replace(tmp, final)
+        return True
+    finally:
+        with contextlib.suppress(FileNotFoundError):
+            tmp.unlink()
 
 
-def record_failure(out: str | Path, mesh_id: str, source: str, stage: str, error: str) -> None:
-    """Record why a mesh failed (failed/<mesh_id>, attrs only: source, stage, one-line error)."""
-    zarr.open_group(f"{out}/failed/{mesh_id}", mode="w",
-                    attributes={"source": source, "stage": stage, "error": error})
+def write_mesh(out: str | Path, mesh_id: str, arrays: dict[str, np.ndarray], attrs: dict,
+               subgroup: str | None = None) -> bool:
+    """Write meshes/<mesh_id>[.<subgroup>].zip holding ``arrays`` (names may contain '/') and ``attrs``
+    (with status "ok"), then publish it; False (nothing changed) when another writer published it first."""
+    final = mesh_file(out, mesh_id, subgroup)
+    tmp = final.with_name(f".{final.name}.{socket.gethostname()}.{os.getpid()}.tmp")
+    zip_store = zarr.storage.ZipStore(tmp, mode="w")
+    try:
+        group = zarr.open_group(zip_store, mode="w", attributes={**attrs, "status": "ok"})
+        for name, data in arrays.items():
+            group.create_array(name, data=np.ascontiguousarray(data), chunks=_chunks(data))
+    finally:
+        zip_store.close()
+    return _publish(tmp, final)
 
 
-def clear_failure(out: str | Path, mesh_id: str) -> None:
-    """Forget a recorded failure (before a retry)."""
+@contextlib.contextmanager
+def read_mesh(out: str | Path, mesh_id: str, subgroup: str | None = None):
+    """The published zarr group of a mesh (or of its subgroup), read-only; the zip is closed on exit.
+    FileNotFoundError where it is not published."""
+    path = mesh_file(out, mesh_id, subgroup)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such mesh")
+    zip_store = zarr.storage.ZipStore(path, mode="r")
+    try:
+        yield zarr.open_group(zip_store, mode="r")
+    finally:
+        zip_store.close()
+
+
+def mesh_attrs(out: str | Path, mesh_id: str, subgroup: str | None = None) -> dict | None:
+    """A published mesh's (or subgroup's) attributes, or None where it is not published."""
+    try:
+        with read_mesh(out, mesh_id, subgroup) as group:
+            return dict(group.attrs)
+    except FileNotFoundError:
+        return None
+
+
+def list_meshes(out: str | Path) -> dict[str, set[str]]:
+    """Every published mesh, with the subgroups published beside it, from one listing of meshes/ (no file
+    is opened)."""
+    meshes: dict[str, set[str]] = {}
+    subs = []
+    with os.scandir(Path(out) / "meshes") as entries:
+        for entry in entries:
+            name = entry.name
+            if name.startswith(".") or not name.endswith(".zip"):
+                continue  # a writer's temporary file
+            stem = name[:-4]
+            sub = next((s for s in SUBGROUPS if stem.endswith(f".{s}")), None)
+            if sub is None:
+                meshes[stem] = set()
+            else:
+                subs.append((stem[:-len(sub) - 1], sub))
+    for mesh_id, sub in subs:
+        if mesh_id in meshes:
+            meshes[mesh_id].add(sub)
+    return dict(sorted(meshes.items()))
+
+
+def temporary_files(out: str | Path) -> list[str]:
+    """Temporary files in meshes/: writers at work now, or killed ones' leftovers."""
+    return sorted(p.name for p in (Path(out) / "meshes").glob(".*.tmp"))
+
+
+def record_failure(out: str | Path, name: str, source: str, stage: str, error: str) -> None:
+    """Record why a mesh (name: its id) or a mesh's subgroup (name: <mesh_id>.<subgroup>) failed: failed/<name>,
+    attrs only (source, stage, one-line error)."""
+    zarr.open_group(f"{out}/failed/{name}", mode="w", attributes={"source": source, "stage": stage, "error": error})
+
+
+def clear_failure(out: str | Path, name: str) -> None:
+    """Forget a recorded failure (before a retry, or once the mesh is published)."""
     root = zarr.open_group(str(out), mode="r+")
-    if f"failed/{mesh_id}" in root:
-        del root[f"failed/{mesh_id}"]
+    if f"failed/{name}" in root:
+        del root[f"failed/{name}"]
 
 
-def _children(out: str | Path, parent: str) -> list[str]:
-    base = Path(out) / parent
-    if base.is_dir():  # local store: a directory listing is far cheaper than zarr's async walk
-        return sorted(p.name for p in base.iterdir() if p.is_dir())
-    return sorted(zarr.open_group(f"{out}/{parent}", mode="r").group_keys())
+def _group_attrs(path: str) -> dict | None:
+    try:
+        return dict(zarr.open_group(path, mode="r").attrs)
+    except (FileNotFoundError, zarr.errors.GroupNotFoundError, json.JSONDecodeError, ValueError, KeyError):
+        return None
 
 
-def list_meshes(out: str | Path) -> dict[str, dict | None]:
-    """Every mesh group under meshes/ with its attrs (None when unreadable)."""
-    return {mesh_id: group_attrs(out, f"meshes/{mesh_id}") for mesh_id in _children(out, "meshes")}
-
-
-def list_failures(out: str | Path) -> dict[str, dict]:
-    """The recorded failures: mesh id -> {source, stage, error}."""
-    failures = {mesh_id: group_attrs(out, f"failed/{mesh_id}") for mesh_id in _children(out, "failed")}
+def list_failures(out: str | Path, names=None) -> dict[str, dict]:
+    """The recorded failures: name -> {source, stage, error}; only those of ``names`` where given (a shard's:
+    no other record is read)."""
+    base = Path(out) / "failed"
+    if names is None:
+        found = sorted(p.name for p in base.iterdir() if p.is_dir())
+    else:
+        found = sorted(n for n in names if (base / n).is_dir())
+    failures = {name: _group_attrs(f"{out}/failed/{name}") for name in found}
     return {k: v for k, v in failures.items() if v is not None}
 
 
-def remove_mesh(out: str | Path, mesh_id: str) -> None:
-    """Delete a (half-written) mesh group, if any."""
-    root = zarr.open_group(str(out), mode="r+")
-    if f"meshes/{mesh_id}" in root:
-        del root[f"meshes/{mesh_id}"]
+def write_ledger(out: str | Path, name: str, ledger: dict) -> None:
+    """Publish sources/<name>.json (a prepare run's inputs: see :func:`read_ledgers`), replacing the same
+    run's earlier one atomically."""
+    final = Path(out) / "sources" / f"{name}.json"
+    tmp = final.with_name(f".{final.name}.{socket.gethostname()}.{os.getpid()}.tmp")
+    tmp.write_text(json.dumps(ledger))
+    os.replace(tmp, final)
+
+
+def read_ledgers(out: str | Path) -> dict[tuple[str, str], dict]:
+    """Every input file any prepare run found: (input root, source) -> {sha256, mesh_id, size, mtime_ns}, the
+    newest ledger's entry where several runs saw one file."""
+    ledgers = []
+    for path in (Path(out) / "sources").glob("*.json"):
+        with contextlib.suppress(json.JSONDecodeError, OSError):
+            ledgers.append(json.loads(path.read_text()))
+    inputs = {}
+    for ledger in sorted(ledgers, key=lambda led: led["written"]):
+        for source, entry in ledger["inputs"].items():
+            inputs[(ledger["root"], source)] = entry
+    return inputs

@@ -5,8 +5,8 @@ from __future__ import annotations
 import gdist
 import numpy as np
 import trimesh
-import zarr
 
+from geodata import store
 from geodata.biharmonic import biharmonic_distances
 from geodata.mesh import Mesh, unique_edges, vertex_normals
 from geodata.stages.normalize import normalize
@@ -47,33 +47,27 @@ def exact_pairs(v: np.ndarray, f: np.ndarray, sources: np.ndarray) -> tuple[np.n
 
 
 def write_store(path, meshes: dict, num_sources: int = 8, biharmonic: bool = False, seed: int = 0) -> str:
-    """A store in the geodata layout, with exact biharmonic distances of the same pairs in biharmonic/."""
+    """A store in the geodata layout (geodata.store's writer), with exact biharmonic distances of the same
+    pairs in biharmonic/; a failure record and a writer's leftover temporary file besides, which readers skip."""
     rng = np.random.default_rng(seed)
-    root = zarr.open_group(str(path), mode="w")
-    root.attrs["geodata_format"] = 1
-    meshes_group = root.create_group("meshes")
+    store.create_store(path, {"pairs": num_sources})
     for mesh_id, (v, f) in meshes.items():
         v = normalize(Mesh(v, f)).vertices
-        g = meshes_group.create_group(mesh_id)
-        g.attrs.update(source=f"{mesh_id}.obj")
-        for name, data in [("vertices", v.astype(np.float32)), ("faces", f.astype(np.int32)),
-                           ("normals", vertex_normals(Mesh(v, f)).astype(np.float32)), ("edges", unique_edges(f).astype(np.int32))]:
-            g.create_array(name, data=data)
+        arrays = {"vertices": v.astype(np.float32), "faces": f.astype(np.int32),
+                  "normals": vertex_normals(Mesh(v, f)).astype(np.float32),
+                  "edges": unique_edges(f).astype(np.int32)}
         sources = rng.choice(len(v), min(num_sources, len(v)), replace=False)
         pairs, dists = exact_pairs(v, f, sources)
-        for kind in ["geodesic"] + (["biharmonic"] if biharmonic else []):
-            if kind == "biharmonic":
-                row = {int(src): k for k, src in enumerate(sources)}
-                rows = np.array([row[int(src)] for src in pairs[:, 0]])
-                dists = biharmonic_distances(Mesh(v, f), sources)[rows, pairs[:, 1]].astype(np.float32)
-            sub = g.create_group(kind)
-            sub.create_array("pairs", data=pairs)
-            sub.create_array("distances", data=dists)
-            if kind == "biharmonic":
-                sub.attrs["status"] = "ok"  # the biharmonic subgroup's own commit mark
-        g.attrs["status"] = "ok"  # commit mark, written last
-    root.create_group("failed").create_group("broken_mesh").attrs.update(stage="load", error="no faces")
-    meshes_group.create_group("unfinished").attrs["source"] = "half.obj"  # no status: must be skipped
+        arrays.update({"geodesic/pairs": pairs, "geodesic/distances": dists})
+        store.write_mesh(path, mesh_id, arrays, {"source": f"{mesh_id}.obj",
+                                                 "geometry_key": store.geometry_key(v, f)})
+        if biharmonic:
+            row = {int(src): k for k, src in enumerate(sources)}
+            rows = np.array([row[int(src)] for src in pairs[:, 0]])
+            bh = biharmonic_distances(Mesh(v, f), sources)[rows, pairs[:, 1]].astype(np.float32)
+            store.write_mesh(path, mesh_id, {"pairs": pairs, "distances": bh}, {}, "biharmonic")
+    store.record_failure(path, "broken_mesh", "broken.obj", "load", "no faces")
+    (store.mesh_file(path, "unfinished").parent / ".unfinished.zip.host.1.tmp").write_bytes(b"PK")  # a killed writer's
     return str(path)
 
 

@@ -1,6 +1,5 @@
 """Helpers for the geodata tests: a small raw folder's contents and store comparisons."""
 import numpy as np
-import zarr
 from click.testing import CliRunner
 
 from geodata import store
@@ -25,13 +24,18 @@ def prepare(raw, out, *extra):
     return result
 
 
+def published(out) -> dict:
+    """Every published mesh's attributes, by mesh id."""
+    return {mesh_id: store.mesh_attrs(out, mesh_id) for mesh_id in store.list_meshes(out)}
+
+
 def store_arrays(out) -> dict:
-    """Every array of every committed mesh, keyed by path."""
+    """Every array of every published mesh, keyed by path."""
     data = {}
-    for mesh_id, attrs in store.list_meshes(out).items():
-        if attrs and attrs.get("status") == "ok":
-            g = zarr.open_group(f"{out}/meshes/{mesh_id}", mode="r")
-            for name in ("vertices", "faces", "normals", "edges", "geodesic/pairs", "geodesic/distances"):
+    for mesh_id in store.list_meshes(out):
+        with store.read_mesh(out, mesh_id) as g:
+            for name in ("vertices", "faces", "normals", "edges", "geodesic/pairs", "geodesic/distances",
+                         "input/face", "input/bary", "input/offset"):
                 data[f"{mesh_id}/{name}"] = g[name][:]
     return data
 

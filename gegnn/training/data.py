@@ -14,6 +14,8 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from geodata import store as geostore
+
 from ..fields.cache import FieldCache, FieldSpec, geometry_key
 from ..graph import Graph, Tensors, disjoint_union, mesh_graph, random_rotation
 from ..nn.geopool import Hierarchy, build_hierarchy
@@ -43,39 +45,44 @@ class MeshGeometry:
 
 
 class GeodesicStore:
-    """Read-only view of a store written by ``geodata prepare``: committed meshes only (status "ok",
-    and for biharmonic distances the subgroup's own mark, ``biharmonic/`` status "ok"). Arrays are
-    read lazily."""
+    """Read-only view of a store written by ``geodata prepare``: its published meshes (for biharmonic
+    distances, those whose ``biharmonic`` subgroup is published too). Opening it lists one folder; a mesh's
+    arrays and attributes are read when asked for."""
 
     def __init__(self, path, distance: str = "geodesic"):
-        import zarr
-
         if distance not in DISTANCES:
             raise ValueError(f"distance must be one of {DISTANCES}, got {distance!r}")
         self.path, self.distance = str(path), distance
-        self.root = zarr.open_group(self.path, mode="r")
-        if self.root.attrs.get("geodata_format") != 1:
-            raise ValueError(f"{path}: not a geodata store (attribute geodata_format != 1)")
-        meshes = self.root["meshes"].groups() if "meshes" in self.root else []
-        self.mesh_ids = sorted(k for k, g in meshes if self._committed(g))
+        try:
+            self.root = geostore.open_store(self.path)
+        except geostore.StoreError as exc:
+            raise ValueError(str(exc)) from None
+        meshes = geostore.list_meshes(self.path)
+        self.mesh_ids = [m for m, subs in meshes.items() if distance == "geodesic" or distance in subs]
 
-    def _committed(self, group) -> bool:
-        if group.attrs.get("status") != "ok":
-            return False
-        return (self.distance == "geodesic"
-                or ("biharmonic" in group and group["biharmonic"].attrs.get("status") == "ok"))
+    def attrs(self, mesh_id: str) -> dict:
+        """The mesh's attributes (source, sha256, geometry_key, params, timings, ...)."""
+        return geostore.mesh_attrs(self.path, mesh_id)
+
+    def key(self, mesh_id: str) -> str:
+        """The field cache's key of the mesh: its geometry key recorded at prepare time (no array is read)."""
+        return self.attrs(mesh_id)["geometry_key"]
 
     def geometry(self, mesh_id: str) -> MeshGeometry:
-        g = self.root[f"meshes/{mesh_id}"]
-        return MeshGeometry(np.asarray(g["vertices"][:], dtype=np.float32),
-                            np.asarray(g["normals"][:], dtype=np.float32),
-                            np.asarray(g["edges"][:], dtype=np.int64),
-                            np.asarray(g["faces"][:], dtype=np.int64))
+        with geostore.read_mesh(self.path, mesh_id) as g:
+            return MeshGeometry(np.asarray(g["vertices"][:], dtype=np.float32),
+                                np.asarray(g["normals"][:], dtype=np.float32),
+                                np.asarray(g["edges"][:], dtype=np.int64),
+                                np.asarray(g["faces"][:], dtype=np.int64))
 
     def pairs(self, mesh_id: str) -> tuple[np.ndarray, np.ndarray]:
         """All stored pairs (P, 2) int64 and their distances (P,) float32."""
-        g = self.root[f"meshes/{mesh_id}/{self.distance}"]
-        return np.asarray(g["pairs"][:], dtype=np.int64), np.asarray(g["distances"][:], dtype=np.float32)
+        if self.distance == "geodesic":
+            with geostore.read_mesh(self.path, mesh_id) as g:
+                return np.asarray(g["geodesic/pairs"][:], dtype=np.int64), np.asarray(g["geodesic/distances"][:],
+                                                                                      dtype=np.float32)
+        with geostore.read_mesh(self.path, mesh_id, self.distance) as g:
+            return np.asarray(g["pairs"][:], dtype=np.int64), np.asarray(g["distances"][:], dtype=np.float32)
 
 
 def mesh_hash(mesh_id: str) -> int:

@@ -4,9 +4,9 @@ import shutil
 
 import numpy as np
 import trimesh
-import zarr
 from click.testing import CliRunner
 
+from geodata import store
 from geodata.cli import main
 from geodata.geodesic import geodesic_solver
 from geodata.mesh import Mesh
@@ -72,13 +72,11 @@ def test_geodata_points_adds_a_committed_subgroup_and_resumes(reference, tmp_pat
     result = CliRunner().invoke(main, ["points", str(out), "--points", "200", "--pairs", "800"])
     assert result.exit_code == 0, result.output
     assert "3 to do" in result.output
-    root = zarr.open_group(str(out), mode="r")
-    for _, g in root["meshes"].groups():
-        if g.attrs.get("status") != "ok":
-            continue
-        p = g["points"]
-        assert p.attrs["status"] == "ok" and p["xyz"].shape == (200, 3) and p["pairs"].shape[1] == 2
-        assert len(np.unique(p["pairs"][:, 0])) == 4 and np.isfinite(p["distances"][:]).all()
+    assert list(store.list_meshes(out).values()) == [{"points"}] * 3
+    for mesh_id in store.list_meshes(out):
+        with store.read_mesh(out, mesh_id, "points") as p:
+            assert p.attrs["status"] == "ok" and p["xyz"].shape == (200, 3) and p["pairs"].shape[1] == 2
+            assert len(np.unique(p["pairs"][:, 0])) == 4 and np.isfinite(p["distances"][:]).all()
     again = CliRunner().invoke(main, ["points", str(out), "--points", "200", "--pairs", "800"])
     assert "0 to do, 3 already done" in again.output
 
@@ -93,11 +91,10 @@ def test_prepare_with_points_writes_what_geodata_points_adds_afterwards(raw, ref
     after = tmp_path / "after.zarr"
     shutil.copytree(reference[0], after)
     assert CliRunner().invoke(main, ["points", str(after), "--points", "200", "--pairs", "3000"]).exit_code == 0
-    ours, theirs = zarr.open_group(str(out), mode="r"), zarr.open_group(str(after), mode="r")
-    ids = sorted(k for k, g in ours["meshes"].groups() if g.attrs.get("status") == "ok")
-    assert len(ids) == 3 and ids == sorted(k for k, g in theirs["meshes"].groups() if g.attrs.get("status") == "ok")
+    ids = sorted(store.list_meshes(out))
+    assert len(ids) == 3 and ids == sorted(store.list_meshes(after))
     for mesh_id in ids:
-        a, b = ours[f"meshes/{mesh_id}/points"], theirs[f"meshes/{mesh_id}/points"]
-        assert a.attrs["status"] == b.attrs["status"] == "ok"
-        for name in ("xyz", "normals", "face", "bary", "pairs", "distances"):
-            np.testing.assert_array_equal(a[name][:], b[name][:], err_msg=f"{mesh_id}/{name}")
+        with store.read_mesh(out, mesh_id, "points") as a, store.read_mesh(after, mesh_id, "points") as b:
+            assert a.attrs["status"] == b.attrs["status"] == "ok"
+            for name in ("xyz", "normals", "face", "bary", "pairs", "distances"):
+                np.testing.assert_array_equal(a[name][:], b[name][:], err_msg=f"{mesh_id}/{name}")

@@ -12,19 +12,20 @@ from click.testing import CliRunner
 from geodata import store
 from geodata.cli import main
 from geodata.mesh import Mesh, closed_manifold_problem, unique_edges
-from storetools import ARGS, BAD, assert_same_arrays as assert_same, prepare, store_arrays as arrays
+from storetools import ARGS, BAD, assert_same_arrays as assert_same, prepare, published, store_arrays as arrays
 
 def test_store_holds_valid_meshes_and_records_bad_input(reference):
     out, output = reference
-    meshes = store.list_meshes(out)
-    ok = {k: a for k, a in meshes.items() if a["status"] == "ok"}
+    ok = published(out)
     assert sorted(a["source"] for a in ok.values()) == ["crate.glb", "lamp.ply", "nested/table.obj"]
     root = zarr.open_group(str(out), mode="r")
-    assert root.attrs["geodata_format"] == 1
+    assert root.attrs["geodata_format"] == 2
     for mesh_id in ok:
-        g = root[f"meshes/{mesh_id}"]
-        v, f, n, e = g["vertices"][:], g["faces"][:], g["normals"][:], g["edges"][:]
-        p, d = g["geodesic/pairs"][:], g["geodesic/distances"][:]
+        with store.read_mesh(out, mesh_id) as g:
+            v, f, n, e = g["vertices"][:], g["faces"][:], g["normals"][:], g["edges"][:]
+            p, d = g["geodesic/pairs"][:], g["geodesic/distances"][:]
+            attrs = dict(g.attrs)
+        assert attrs["status"] == "ok" and attrs["geometry_key"] == store.geometry_key(v, f)
         assert (v.dtype, f.dtype, n.dtype, e.dtype, p.dtype, d.dtype) == (
             np.float32, np.int32, np.float32, np.int32, np.uint32, np.float32)
         assert closed_manifold_problem(Mesh(v, f)) is None
@@ -35,7 +36,7 @@ def test_store_holds_valid_meshes_and_records_bad_input(reference):
         assert np.array_equal(e, unique_edges(f.astype(np.int64)))
         assert len(p) >= 3000 and (p[:, 0] != p[:, 1]).all() and p.max() < len(v)
         assert np.isfinite(d).all() and (d > 0).all()
-        assert set(g.attrs["timings"]) == {"load", "watertight", "remesh", "simplify", "normalize", "geodesic"}
+        assert set(attrs["timings"]) == {"load", "watertight", "remesh", "simplify", "normalize", "geodesic"}
     failures = store.list_failures(out)
     assert sorted(a["source"] for a in failures.values()) == sorted(BAD)
     for a in failures.values():
@@ -57,14 +58,13 @@ def test_stored_arrays_are_the_stages_output_and_exact_distances(reference, raw)
     from geodata.stages.load import load_mesh_bytes
 
     out, _ = reference
-    for mesh_id, attrs in store.list_meshes(out).items():
-        if attrs["status"] != "ok":
-            continue
+    for mesh_id, attrs in published(out).items():
         path = raw / attrs["source"]
         expected = prepare_geometry(load_mesh_bytes(path.read_bytes(), path.suffix),
                                     PrepareConfig(target_vertices=600))
-        g = zarr.open_group(str(out / "meshes" / mesh_id), mode="r")
-        v, f, p, d = g["vertices"][:], g["faces"][:], g["geodesic/pairs"][:].astype(np.int64), g["geodesic/distances"][:]
+        with store.read_mesh(out, mesh_id) as g:
+            v, f = g["vertices"][:], g["faces"][:]
+            p, d = g["geodesic/pairs"][:].astype(np.int64), g["geodesic/distances"][:]
         np.testing.assert_array_equal(v, expected.vertices.astype(np.float32))
         np.testing.assert_array_equal(f, expected.faces)
         e = unique_edges(f.astype(np.int64))
@@ -85,7 +85,8 @@ def test_info_lists_counts_and_failures(reference):
     out, _ = reference
     result = CliRunner().invoke(main, ["info", str(out)])
     assert result.exit_code == 0, result.output
-    assert "3 ok, 7 failed, 0 incomplete" in result.output
+    assert "inputs: 10 files: 3 ok, 0 duplicate, 7 failed, 0 pending" in result.output
+    assert "meshes: 3 published, 7 failed" in result.output
     for name in BAD:
         assert name in result.output
 
@@ -94,7 +95,7 @@ def test_rerun_does_nothing_and_other_params_are_refused(reference, raw):
     out, _ = reference
     before = arrays(out)
     result = prepare(raw, out)
-    assert "0 to do, 3 already committed, 7 failed before" in result.output
+    assert "10 input files, 10 distinct, 3 published, 7 failed, 0 pending; 0 to do" in result.output
     assert_same(before, arrays(out))
     refused = CliRunner().invoke(main, ["prepare", str(raw), str(out), "--pairs", "10", "--target-vertices", "600"])
     assert refused.exit_code != 0 and "pairs" in refused.output
@@ -120,21 +121,21 @@ def test_sigkill_loses_nothing_and_rerun_finishes_exactly_the_rest(reference, ra
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     deadline = time.monotonic() + 300
     while time.monotonic() < deadline:  # kill the whole process group once the first mesh is committed
-        if (out / "meshes").exists() and any(a and a.get("status") == "ok" for a in store.list_meshes(out).values()):
+        if (out / "meshes").exists() and store.list_meshes(out):
             break
         time.sleep(0.05)
     os.killpg(proc.pid, signal.SIGKILL)
     proc.wait()
-    committed = sorted(k for k, a in store.list_meshes(out).items() if a and a.get("status") == "ok")
+    committed = sorted(store.list_meshes(out))
     assert 1 <= len(committed) < 3
-    # Make one committed mesh look like a kill hit it while writing: no mark, a truncated chunk.
-    group = zarr.open_group(f"{out}/meshes/{committed[0]}", mode="r+")
-    del group.attrs["status"]
-    chunk = next(p for p in (out / "meshes" / committed[0] / "geodesic" / "distances").rglob("*")
-                 if p.is_file() and p.name != "zarr.json")
-    chunk.write_bytes(chunk.read_bytes()[:10])
+    # A writer killed while writing a mesh leaves only its temporary file: make one such, truncated.
+    published_zip = store.mesh_file(out, committed[0])
+    leftover = published_zip.with_name(f".{published_zip.name}.host.1.tmp")
+    leftover.write_bytes(published_zip.read_bytes()[:100])
+    published_zip.unlink()
     result = prepare(raw, out)
-    assert f"{len(committed) - 1} already committed" in result.output
+    assert f"{len(committed) - 1} published" in result.output
+    assert leftover.name in store.temporary_files(out)  # info counts it: a killed run's leftover
     assert_same(arrays(reference[0]), arrays(out))
 
 
@@ -160,7 +161,7 @@ def test_a_crashing_or_hanging_mesh_fails_alone(raw, tmp_path, monkeypatch):
     failures = {a["source"]: a for a in store.list_failures(tmp_path / "out.zarr").values()}
     assert failures["lamp.ply"]["stage"] == "watertight" and "SIGSEGV" in failures["lamp.ply"]["error"]
     assert failures["crate.glb"]["stage"] == "watertight" and "timed out" in failures["crate.glb"]["error"]
-    ok = [a["source"] for a in store.list_meshes(tmp_path / "out.zarr").values() if a.get("status") == "ok"]
+    ok = [a["source"] for a in published(tmp_path / "out.zarr").values()]
     assert ok == ["nested/table.obj"] and "Traceback" not in result.output
 
 
@@ -190,7 +191,7 @@ def test_flat_input_is_kept_with_a_warning_in_attrs_and_info(tmp_path):
     out = tmp_path / "out.zarr"
     result = CliRunner().invoke(main, ["prepare", str(raw), str(out), "--pairs", "2000", "--target-vertices", "600"])
     assert result.exit_code == 0 and "1 ok, 0 failed" in result.output, result.output
-    (attrs,) = store.list_meshes(out).values()
+    (attrs,) = published(out).values()
     assert attrs["status"] == "ok"
     assert attrs["warnings"] == ["flat input thickened: all 3 vertices lie in one plane (1 faces); the "
                                  "watertight stage made a thin closed slab of it"]
@@ -218,7 +219,7 @@ def test_realworld_kinds_prepare_without_traceback(tmp_path):
     result = CliRunner().invoke(main, ["prepare", str(tmp_path / "raw"), str(out), "--pairs", "2000",
                                        "--target-vertices", "600", "--jobs", "2"])
     assert result.exit_code == 0 and "Traceback" not in result.output, result.output
-    ok = {a["source"]: a for a in store.list_meshes(out).values() if a.get("status") == "ok"}
+    ok = {a["source"]: a for a in published(out).values()}
     failed = {a["source"]: a for a in store.list_failures(out).values()}
     for name, (status, words) in expected.items():
         if status == "ok":
