@@ -22,7 +22,8 @@ over a CUDA build of torch). Steps, each a process of its own whose exit status 
   throughput    the loader against the measured GPU step (benchmarks/bench_train_throughput.py)
 
 Every step's output is kept in OUT/<step>.log; OUT/REPORT.md has a line per step and the verdict, which
-is also the last line printed. The exit status is 0 only if every step passed.
+is also the last line printed. The exit status is 0 only if every step passed. A failed environment step
+ends the check there (no CUDA: every later result would be void), its reason in the verdict.
 """
 from __future__ import annotations
 
@@ -48,12 +49,14 @@ class Step:
     name: str
     argv: list[str]  # a command, or [] with ``call`` set
     call: object = None  # a Python function of the log file's handle: raises on failure
+    required: bool = False  # the later steps mean nothing without it: its failure ends the check
 
 
-def run_steps(steps: list[Step], out: Path) -> list[tuple[str, bool, float]]:
-    """Run every step (a failed one does not stop the others), logging each to OUT/<name>.log."""
+def run_steps(steps: list[Step], out: Path) -> list[tuple[str, bool | None, float]]:
+    """Run the steps, logging each to OUT/<name>.log: a failed step does not stop the others unless it is
+    required, after which the rest are not run (their result None)."""
     results = []
-    for step in steps:
+    for i, step in enumerate(steps):
         print(f"== {step.name}: {' '.join(step.argv) or step.call.__name__}", flush=True)
         t0 = time.perf_counter()
         with open(out / f"{step.name}.log", "w") as log:
@@ -68,11 +71,27 @@ def run_steps(steps: list[Step], out: Path) -> list[tuple[str, bool, float]]:
                 ok = False
         results.append((step.name, ok, time.perf_counter() - t0))
         print(f"   {'PASS' if ok else 'FAIL'} ({time.perf_counter() - t0:.0f} s)", flush=True)
+        if step.required and not ok:
+            results += [(later.name, None, 0.0) for later in steps[i + 1:]]
+            print(f"   {step.name} failed: the other steps are not run", flush=True)
+            break
     return results
 
 
-def verdict(results) -> str:
-    failed = [name for name, ok, _ in results if not ok]
+def failure_reason(out: Path, name: str) -> str:
+    """The last line of a failed step's log: its error."""
+    p = out / f"{name}.log"
+    lines = [line.strip() for line in p.read_text().splitlines() if line.strip()] if p.exists() else []
+    return lines[-1] if lines else "no output"
+
+
+def verdict(results, out: Path | None = None) -> str:
+    skipped = [name for name, ok, _ in results if ok is None]
+    failed = [name for name, ok, _ in results if ok is False]
+    if skipped:
+        reason = f": {failure_reason(out, failed[-1])}" if out is not None else ""
+        return (f"GPU check: FAIL ({failed[-1]} failed{reason}; {len(skipped)} later steps not run: "
+                f"{', '.join(skipped)})")
     if failed:
         return f"GPU check: FAIL ({len(failed)} of {len(results)} steps: {', '.join(failed)})"
     return f"GPU check: PASS (all {len(results)} steps)"
@@ -166,7 +185,7 @@ def make_steps(out: Path, store: Path | None, gegnn: list[str]) -> list[Step]:
 
     geodata = [py, "-m", "geodata.cli"]
     return [
-        Step("environment", [], check_environment),
+        Step("environment", [], check_environment, required=True),
         Step("tests", [py, "-m", "pytest", "-q", "-p", "no:cacheprovider", "tests/gegnn/test_gpu_path.py",
                        "tests/gegnn/test_train.py", "--durations", "10"]),
         Step("bench-gpu", [py, "benchmarks/bench_gpu.py"]),
@@ -200,7 +219,8 @@ def write_report(out: Path, results, path: Path) -> None:
              f"`scripts/gpu_check.sh` on {datetime.date.today()}, commit {commit or '?'}.", "",
              f"GPU: {gpu or '?'}  ", f"CPU: {cpu}, {len(os.sched_getaffinity(0))} cores", "",
              "| step | result | time |", "|---|---|---:|"]
-    lines += [f"| {name} | {'PASS' if ok else '**FAIL**'} | {seconds:.0f} s |" for name, ok, seconds in results]
+    lines += [f"| {name} | {'not run' if ok is None else 'PASS' if ok else '**FAIL**'} | {seconds:.0f} s |"
+              for name, ok, seconds in results]
     def summary(text):  # pytest's counts and its slowest tests, without the progress dots and warnings
         keep = [line for line in text.splitlines()
                 if re.match(r"^[\d.]+s call ", line) or re.search(r"\d+ (passed|failed)", line)]
@@ -209,7 +229,7 @@ def write_report(out: Path, results, path: Path) -> None:
     def plain(text):  # without progress bars
         return "\n".join(line for line in text.splitlines() if "it/s" not in line and "%|" not in line and line.strip())
 
-    lines += ["", f"**{verdict(results)}**", "", "## Environment", "```", log("environment").strip(), "```", "",
+    lines += ["", f"**{verdict(results, out)}**", "", "## Environment", "```", log("environment").strip(), "```", "",
               "## Tests", "```", summary(log("tests")), "```", "",
               log("bench-gpu").strip(), "", "## Training (sample meshes)"]
     for run in ("paper", "landmark"):
@@ -232,7 +252,7 @@ def main(argv=None) -> int:
     results = run_steps(make_steps(args.out, args.store, [sys.executable, "-m", "gegnn.cli"]), args.out)
     write_report(args.out, results, args.out / "REPORT.md")
     print(f"report: {args.out / 'REPORT.md'}")
-    print(verdict(results))
+    print(verdict(results, args.out))
     return 0 if all(ok for _, ok, _ in results) else 1
 
 

@@ -41,6 +41,25 @@ def test_a_failing_step_fails_the_check_and_the_others_still_run(tmp_path):
     assert gpu_check.verdict(ok) == "GPU check: PASS (all 2 steps)"
 
 
+def test_a_failed_required_step_ends_the_check_with_its_reason(tmp_path):
+    """A required step (the environment) that fails stops the check: the steps after it do not run, are
+    reported as not run, and the verdict says which step failed and why."""
+    py = sys.executable
+    steps = [Step("good", [py, "-c", "print('fine')"]),
+             Step("gate", [py, "-c", "import sys; print('no CUDA device: nothing to check'); sys.exit(1)"],
+                  required=True),
+             Step("later", [py, "-c", f"open({str(tmp_path / 'ran')!r}, 'w')"]),
+             Step("last", [py, "-c", f"open({str(tmp_path / 'ran')!r}, 'w')"])]
+    results = gpu_check.run_steps(steps, tmp_path)
+    assert [(name, ok) for name, ok, _ in results] == [("good", True), ("gate", False), ("later", None),
+                                                       ("last", None)]
+    assert not (tmp_path / "later.log").exists() and not (tmp_path / "ran").exists()
+    assert gpu_check.verdict(results, tmp_path) == ("GPU check: FAIL (gate failed: no CUDA device: nothing to "
+                                                    "check; 2 later steps not run: later, last)")
+    passing = gpu_check.run_steps([steps[0], Step("gate", [py, "-c", "pass"], required=True), steps[0]], tmp_path)
+    assert [ok for _, ok, _ in passing] == [True, True, True]
+
+
 def test_eval_comparison_holds_cuda_to_the_cpu(tmp_path):
     cpu = _eval_csv(tmp_path / "cpu.csv", [("a", 0.0100), ("b", 0.0200), ("overall", 0.0150)])
     near = _eval_csv(tmp_path / "near.csv", [("a", 0.010001), ("b", 0.0200), ("overall", 0.015)])
@@ -65,3 +84,19 @@ def test_the_check_without_cuda_fails_at_once(tmp_path):
         pytest.skip("a CUDA device is here")
     results = gpu_check.run_steps([Step("environment", [], gpu_check.check_environment)], tmp_path)
     assert not results[0][1] and "no CUDA device" in (tmp_path / "environment.log").read_text()
+
+
+def test_the_whole_check_without_cuda_stops_after_the_environment(tmp_path, capsys):
+    """scripts/gpu_check.py on a machine without CUDA runs no test, benchmark or training: its verdict, on the
+    last line and in the report, names the environment step and the reason."""
+    import torch
+
+    if torch.cuda.is_available():
+        pytest.skip("a CUDA device is here")
+    assert gpu_check.main([str(tmp_path / "check")]) == 1
+    last = capsys.readouterr().out.strip().splitlines()[-1]
+    assert last.startswith("GPU check: FAIL (environment failed: FAILED: RuntimeError: no CUDA device")
+    assert "8 later steps not run: tests, bench-gpu, data," in last
+    assert sorted(p.name for p in (tmp_path / "check").iterdir()) == ["REPORT.md", "environment.log"]
+    report = (tmp_path / "check" / "REPORT.md").read_text()
+    assert "| tests | not run |" in report and f"**{last}**" in report
