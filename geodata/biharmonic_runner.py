@@ -17,6 +17,7 @@ class BiharmonicConfig:
     pairs: int = 600_000
     seed: int = 0
     timeout: float = 1800.0
+    max_memory: int | None = None  # bytes one mesh's process may use (None: no limit)
 
 
 def _compute(mesh: Mesh, rng: np.random.Generator, config: BiharmonicConfig) -> dict:

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import logging
 import sys
 from collections import defaultdict
@@ -27,6 +28,18 @@ class _TqdmHandler(logging.Handler):
 
     def emit(self, record):
         tqdm.write(self.format(record), file=sys.stderr)
+
+
+def _max_memory(text: str, jobs: int, scheduler: str | None) -> int | None:
+    """--max-memory's bytes (None: no limit)."""
+    from geodata.parallel import default_max_memory, parse_memory
+
+    if text.strip().lower() == "auto":
+        return None if scheduler else default_max_memory(jobs)
+    try:
+        return parse_memory(text)
+    except ValueError as exc:
+        raise click.BadParameter(str(exc), param_hint="--max-memory") from None
 
 
 def _setup_logging(log_file: str | None) -> None:
@@ -66,6 +79,12 @@ def _scale_options(fn):
                           "shards may write one store at once."),
         click.option("--log", "log_file", type=click.Path(dir_okay=False), default=None,
                      help="Also append the log lines to this file."),
+        click.option("--max-memory", default="auto", show_default=True, metavar="SIZE",
+                     help="Memory one mesh's process may use (4G, 512M; 'none': no limit); a mesh that needs "
+                          "more is recorded as failed ('out of memory') and the batch goes on, instead of the "
+                          "kernel killing it (SLURM would mark the whole task OUT_OF_MEMORY). auto: 90% of "
+                          "this task's memory (SLURM's allocation, the cgroup's limit, or the machine's) "
+                          "over --jobs; none with --scheduler (the workers' machines are not this one)."),
     ]
     for option in reversed(options):
         fn = option(fn)
@@ -133,7 +152,7 @@ def main():
 @_list_options
 @_scale_options
 def prepare(raw_dir, out, pairs, target_vertices, collapse, seed, geodesic_backend, timeout, n_points, retry_failed,
-            strict, check, include, exclude, jobs, backend, scheduler, shard, log_file):
+            strict, check, include, exclude, jobs, backend, scheduler, shard, log_file, max_memory):
     """Prepare every mesh file under RAW_DIR (OBJ/OFF/PLY/STL/GLB, searched recursively) into store OUT.
 
     Stages: load, watertight (manifold3d), isotropic remesh (pymeshlab), QEM edge collapse,
@@ -146,7 +165,8 @@ def prepare(raw_dir, out, pairs, target_vertices, collapse, seed, geodesic_backe
     from geodata.prepare import PrepareConfig, plan_shard, process_task
 
     _setup_logging(log_file)
-    config = PrepareConfig(pairs, target_vertices, collapse, seed, geodesic_backend, timeout)
+    config = PrepareConfig(pairs, target_vertices, collapse, seed, geodesic_backend, timeout,
+                           _max_memory(max_memory, jobs, scheduler))
     try:
         if not check:
             store.create_store(out, config.store_params())
@@ -169,8 +189,9 @@ def prepare(raw_dir, out, pairs, target_vertices, collapse, seed, geodesic_backe
     _summary(rows, len(plan.published), 0 if retry_failed else len(plan.failed - plan.published))
     if n_points:
         from geodata.points_runner import PointsConfig, process_points
-        rows += _add_subgroup(out, "points", process_points, PointsConfig(n_points, pairs, seed, timeout),
-                              retry_failed, False, jobs, backend, scheduler, shard, log_file)
+        rows += _add_subgroup(out, "points", process_points,
+                              PointsConfig(n_points, pairs, seed, timeout, config.max_memory), retry_failed, False,
+                              jobs, backend, scheduler, shard, log_file, max_memory)
     failed = sum(r["status"] != "ok" for r in rows)
     if strict and failed:
         raise click.ClickException(f"--strict: {failed} of {len(rows)} meshes failed (listed above and in "
@@ -251,7 +272,7 @@ def biharmonic(out, pairs, seed, timeout, retry_failed, check, **scale):
 
 
 def _add_subgroup(out, subgroup, process, config, retry_failed, check, jobs, backend, scheduler, shard,
-                  log_file) -> list[dict]:
+                  log_file, max_memory) -> list[dict]:
     """Run ``process`` on this shard's published meshes still without ``subgroup``, with a summary; the
     rows of this run. ``check``: print the counts and exit (:func:`_exit_check`) instead."""
     _setup_logging(log_file)
@@ -265,6 +286,7 @@ def _add_subgroup(out, subgroup, process, config, retry_failed, check, jobs, bac
         _exit_check(f"{subgroup} {out}: {n_done} done, {n_failed} failed, {len(tasks)} pending{where}", len(tasks))
     log.info("%s %s: %d to do, %d already done, %d failed before%s", subgroup, out, len(tasks), n_done, n_failed,
              where)
+    config = dataclasses.replace(config, max_memory=_max_memory(max_memory, jobs, scheduler))
     rows = _run(partial(process, out=out, config=config), tasks, subgroup, jobs, backend, scheduler)
     _summary(rows, n_done, n_failed)
     return rows

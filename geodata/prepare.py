@@ -42,10 +42,11 @@ class PrepareConfig:
     seed: int = 0
     geodesic_backend: str = "vtp"
     timeout: float = 1800.0  # seconds a mesh may take before it is recorded as failed
+    max_memory: int | None = None  # bytes one mesh's process may use (None: no limit)
 
     def store_params(self) -> dict:
         """The parameters that decide the data (a store holds one setting of them)."""
-        return {k: v for k, v in asdict(self).items() if k != "timeout"}
+        return {k: v for k, v in asdict(self).items() if k not in ("timeout", "max_memory")}
 
 
 @dataclass(frozen=True)
@@ -132,7 +133,7 @@ def run_stage(timings: dict, stage: str, fn, *args, check: bool = True, zero_are
     t = time.perf_counter()
     try:
         result = fn(*args)
-    except MeshError:
+    except (MeshError, MemoryError):  # out of memory: worded by run_isolated (with its --max-memory)
         raise
     except Exception as exc:  # a library error is this stage's failure, in one line
         raise MeshError(stage, one_line(exc)) from None
@@ -260,7 +261,7 @@ def process_task(task: MeshTask, out: str, config: PrepareConfig) -> dict:
         if task.error:
             raise MeshError("load", task.error)
         arrays, computed = run_isolated(_compute, task, config, timeout=config.timeout,
-                                        warnings_out=row["warnings"])
+                                        warnings_out=row["warnings"], max_memory=config.max_memory)
     except MeshError as exc:
         store.record_failure(out, task.mesh_id, task.source, exc.stage, exc.reason)
         return {**row, "status": "failed", "stage": exc.stage, "error": exc.reason,

@@ -35,7 +35,7 @@ def run_subgroup(mesh_id: str, out: str, subgroup: str, compute, config, attrs: 
     name = f"{mesh_id}.{subgroup}"
     try:
         arrays, seconds = run_isolated(_in_child, compute, out, mesh_id, subgroup, config, timeout=config.timeout,
-                                       warnings_out=row["warnings"])
+                                       warnings_out=row["warnings"], max_memory=config.max_memory)
     except MeshError as exc:
         store.record_failure(out, name, source, exc.stage, exc.reason)
         return {**row, "status": "failed", "stage": exc.stage, "error": exc.reason,
