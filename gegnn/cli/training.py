@@ -64,9 +64,9 @@ def _blocks(ctx, param, value):
               help="torch's deterministic algorithms: identical runs and resumes on a GPU too, where atomic "
                    "scatter-adds otherwise sum in a varying order (slower; CPU runs are deterministic anyway).")
 @click.option("--field-cache", type=click.Path(file_okay=False),
-              help="Zarr cache of the landmark fields or spectral codes, filled before the first step and read "
-                   "by every loader worker and rank (default RUN/fields.zarr; keyed by mesh content, so runs "
-                   "may share one). ~2.5 MB per mesh and draw at K = 128, 5k vertices.")
+              help="Cache folder of the landmark fields or spectral codes, filled before the first step and read "
+                   "by every loader worker and rank (default RUN/fields; keyed by mesh content, so runs, even "
+                   "concurrent ones, may share one). ~1.3 MB per mesh and draw at K = 128, 5k vertices (float16).")
 @click.option("--init", "init_ckpt", type=click.Path(exists=True, dir_okay=False), help="Start from these weights.")
 @click.option("--channels", default=256, show_default=True)
 @click.option("--blocks", callback=_blocks, help="ResBlocks per level, encoder = decoder [2,3,3,3,2].")

@@ -64,7 +64,7 @@ class TrainConfig:
     resume: bool = False
     init: str | None = None
     decoder_warmup: int = 0          # decoder-only steps on frozen network codes before the first epoch
-    field_cache: str | None = None  # zarr cache of the landmark fields or spectral codes (None: RUN/fields.zarr)
+    field_cache: str | None = None  # cache folder of the landmark fields or spectral codes (None: RUN/fields)
     deterministic: bool = False      # torch's deterministic algorithms: bitwise-exact resume on CUDA too
 
 
@@ -236,7 +236,7 @@ def _train(cfg: TrainConfig, model_config, resume, run: Path, device, ctx: Dist,
     if not train_ids:
         raise ValueError(f"{cfg.store}: no committed meshes with {cfg.distance} distances")
     spec = FieldSpec.of(model.config)
-    cache = (cfg.field_cache or str(run / "fields.zarr")) if spec else None
+    cache = (cfg.field_cache or str(run / "fields")) if spec else None
     dataset, val_dataset = (BatchDataset(path, cfg.distance, cfg.seed, cfg.pairs_per_mesh, cfg.rotate,
                                          model.config.levels, model.config.sigma_c, model.config.sigma_n,
                                          spec, cache, model.config.points)

@@ -1,5 +1,8 @@
 """The field cache (gegnn.fields.cache): keys by mesh content, one entry per (mesh, draw), what a fill
-stores is what the spec computes, and an entry is read only once complete."""
+stores is what the spec computes (float16 landmark fields), and an entry is read only once complete,
+even while other processes fill the same cache."""
+import json
+
 import numpy as np
 import pytest
 from gegnn_stores import ellipsoid, flat_grid, small_config
@@ -7,6 +10,11 @@ from gegnn_stores import ellipsoid, flat_grid, small_config
 from gegnn.fields.cache import LANDMARK_DRAWS, FieldCache, FieldSpec, geometry_key
 from gegnn.fields.landmarks import landmark_fields
 from gegnn.fields.spectral import spectral_codes
+
+
+def as_stored(fields):
+    """Landmark fields as the cache keeps them (float16), read back as float32."""
+    return fields.astype(np.float16).astype(np.float32)
 
 
 def test_the_key_is_the_content_whatever_its_dtype_and_changes_with_any_vertex_or_face():
@@ -64,31 +72,99 @@ def test_a_cloud_spec_computes_distances_along_the_points_own_graph():
     assert (FieldSpec("landmark", 6, 8).compute(v, f)[-12:] == 0).all()
 
 
-def test_each_mesh_and_draw_is_its_own_entry(tmp_path):
-    cache = FieldCache(tmp_path / "fields.zarr", FieldSpec("landmark", 3))
-    a, b = np.arange(12, dtype=np.float32).reshape(4, 3), -np.ones((4, 3), np.float32)
+def test_each_mesh_and_draw_is_its_own_entry_published_once(tmp_path):
+    cache = FieldCache(tmp_path / "fields", FieldSpec("landmark", 3))
+    a, b = np.arange(12, dtype=np.float32).reshape(4, 3), -np.ones((4, 3), np.float32)  # exact in float16
     assert not cache.has("mesh", 0) and cache.get("mesh", 0) is None
-    cache.put("mesh", 0, a)
-    cache.put("mesh", 1, b)
-    cache.put("other", 0, b[:2])
+    assert cache.put("mesh", 0, a) and cache.put("mesh", 1, b) and cache.put("other", 0, b[:2])
     np.testing.assert_array_equal(cache.get("mesh", 0), a)
     np.testing.assert_array_equal(cache.get("mesh", 1), b)
     np.testing.assert_array_equal(cache.get("other", 0), b[:2])
     assert cache.get("mesh", 2) is None and cache.get("other", 1) is None
-    cache.put("mesh", 0, b)  # a recomputed entry replaces the old one
-    np.testing.assert_array_equal(cache.get("mesh", 0), b)
-    again = FieldCache(tmp_path / "fields.zarr", FieldSpec("landmark", 3))  # another process opening it
+    assert not cache.put("mesh", 0, b)  # a published entry is never rewritten: the first stays
+    np.testing.assert_array_equal(cache.get("mesh", 0), a)
+    again = FieldCache(tmp_path / "fields", FieldSpec("landmark", 3))  # another process opening it
     np.testing.assert_array_equal(again.get("mesh", 1), b)
-    assert FieldCache(tmp_path / "fields.zarr", FieldSpec("landmark", 4)).get("mesh", 1) is None  # other K
-    assert again.root.attrs["gegnn_landmark_cache"] == 1
+    assert FieldCache(tmp_path / "fields", FieldSpec("landmark", 4)).get("mesh", 1) is None  # other K
+    assert json.loads((tmp_path / "fields" / "format.json").read_text()) == {"gegnn_field_cache": 2}
+    # one plain .npy file an entry, no temporary file left: the layout the module's docstring gives
+    files = sorted(str(f.relative_to(tmp_path / "fields")) for f in (tmp_path / "fields").rglob("*") if f.is_file())
+    assert files == ["format.json", "k3/me/mesh-0.npy", "k3/me/mesh-1.npy", "k3/ot/other-0.npy"]
+    assert np.load(tmp_path / "fields" / "k3" / "me" / "mesh-1.npy", allow_pickle=False).dtype == np.float16
+    assert cache.get("mesh", 0).dtype == np.float32
+
+
+def test_landmark_fields_read_back_within_float16_rounding_and_codes_exactly(tmp_path):
+    v, f = ellipsoid()
+    landmark, spectral = FieldSpec("landmark", 12), FieldSpec("spectral", 8)
+    fields, codes = landmark.compute(v, f, seed=1), spectral.compute(v, f)
+    FieldCache(tmp_path / "c", landmark).put("e", 1, fields)
+    FieldCache(tmp_path / "c", spectral).put("e", 0, codes)
+    back = FieldCache(tmp_path / "c", landmark).get("e", 1)
+    assert not np.array_equal(back, fields)  # rounded,
+    assert np.all(np.abs(back - fields) <= 2.0 ** -11 * np.abs(fields) + 2.0 ** -25)  # by half an ulp at most
+    np.testing.assert_array_equal(FieldCache(tmp_path / "c", spectral).get("e", 0), codes)
 
 
 def test_an_entry_killed_while_written_is_not_read(tmp_path):
-    cache = FieldCache(tmp_path / "fields.zarr", FieldSpec("landmark", 3))
-    cache.root.create_array(cache._name("mesh", 0), shape=(4, 3), dtype=np.float32)  # "complete" never set
+    cache = FieldCache(tmp_path / "fields", FieldSpec("landmark", 3))
+    entry = cache.entry("mesh", 0)
+    entry.parent.mkdir(parents=True)
+    (entry.parent / f".{entry.name}.host.123.tmp").write_bytes(b"\x93NUMPY")  # a killed writer's half file
     assert not cache.has("mesh", 0) and cache.get("mesh", 0) is None
-    cache.put("mesh", 0, np.ones((4, 3), np.float32))
+    assert cache.put("mesh", 0, np.ones((4, 3), np.float32))
     assert cache.has("mesh", 0)
+
+
+def test_a_field_cache_of_the_old_zarr_format_is_refused_by_name(tmp_path):
+    import zarr
+
+    zarr.open_group(str(tmp_path / "old"), mode="w").attrs["gegnn_landmark_cache"] = 1
+    with pytest.raises(ValueError, match="old: a field cache of format 1 .zarr.*delete it or give another --field-cache"):
+        FieldCache(tmp_path / "old", FieldSpec("landmark", 3)).has("mesh", 0)
+
+
+def _fill_again_and_again(path, rounds):
+    """A run filling the cache: every entry, ``rounds`` times over (as two runs or ranks may compute one)."""
+    cache = FieldCache(path, FieldSpec("landmark", 64))
+    for _ in range(rounds):
+        for key, seed in CONCURRENT_ENTRIES:
+            cache.put(key, seed, np.full((4000, 64), _entry_value(key, seed), np.float32))
+
+
+CONCURRENT_ENTRIES = [(f"{k:02x}mesh", seed) for k in range(24) for seed in range(2)]
+
+
+def _entry_value(key, seed):
+    return 1 + int(key[:2], 16) * 2 + seed  # exact in float16, never 0 (the value of a chunk not written)
+
+
+def test_concurrent_fills_and_reads_never_see_an_incomplete_entry(tmp_path):
+    """Two processes fill one cache (each entry many times over, as concurrent runs would) while this one
+    reads it: an entry that exists is whole, every time. The zarr cache of format 1 failed this: an entry
+    rewritten with overwrite=True read as zeros between its `complete` check and its data."""
+    import multiprocessing
+
+    spawn = multiprocessing.get_context("spawn")
+    path = tmp_path / "shared"
+    FieldCache(path, FieldSpec("landmark", 64)).create()
+    writers = [spawn.Process(target=_fill_again_and_again, args=(path, 6)) for _ in range(2)]
+    for w in writers:
+        w.start()
+    cache, reads, bad = FieldCache(path, FieldSpec("landmark", 64)), 0, []
+    while any(w.is_alive() for w in writers) or reads == 0:
+        for key, seed in CONCURRENT_ENTRIES:
+            if cache.has(key, seed):
+                fields = cache.get(key, seed)
+                reads += 1
+                if fields is None or fields.shape != (4000, 64) or not (fields == _entry_value(key, seed)).all():
+                    bad.append((key, seed))
+    for w in writers:
+        w.join()
+    assert all(w.exitcode == 0 for w in writers)
+    assert reads > len(CONCURRENT_ENTRIES) and bad == []
+    assert all((cache.get(k, s) == _entry_value(k, s)).all() for k, s in CONCURRENT_ENTRIES)
+    assert not list(path.rglob("*.tmp"))  # every writer's temporary file gone
 
 
 @pytest.mark.parametrize("jobs", [1, 2])
@@ -96,18 +172,19 @@ def test_a_fill_stores_each_meshs_draws_as_computed(tmp_path, jobs):
     spec = FieldSpec("landmark", 6)
     meshes = {"ellipsoid": ellipsoid(), "grid": flat_grid(9)}
     todo = [(name, v, f, seed) for name, (v, f) in meshes.items() for seed in (0, 2)] + [("grid", *meshes["grid"], 1)]
-    cache = FieldCache(tmp_path / "fields.zarr", spec)
-    cache.fill(todo, jobs=jobs, progress=False)
+    cache = FieldCache(tmp_path / "fields", spec)
+    assert cache.fill(todo, jobs=jobs, progress=False) == len(todo)  # each published by this fill
     for name, v, f, seed in todo:
-        np.testing.assert_array_equal(cache.get(name, seed), spec.compute(v, f, seed))
+        np.testing.assert_array_equal(cache.get(name, seed), as_stored(spec.compute(v, f, seed)))
     assert not np.array_equal(cache.get("grid", 0), cache.get("grid", 1))  # each draw its own landmarks
     assert cache.get("ellipsoid", 1) is None  # nothing stored that was not asked for
+    assert cache.fill(todo[:2], jobs=jobs, progress=False) == 0  # computed again, published before: kept
 
 
 def test_a_fill_shows_its_progress_only_when_asked(tmp_path, capsys):
     v, f = flat_grid(9)
     for progress in (False, True):
-        FieldCache(tmp_path / f"{progress}.zarr", FieldSpec("landmark", 4)).fill([("grid", v, f, 0)], progress=progress)
+        FieldCache(tmp_path / f"{progress}", FieldSpec("landmark", 4)).fill([("grid", v, f, 0)], progress=progress)
         assert ("landmark fields" in capsys.readouterr().err) == progress
 
 
@@ -116,9 +193,9 @@ def test_a_fill_with_jobs_computes_in_fresh_processes(tmp_path, monkeypatch):
     run could hang), none in this one, and stored here as each arrives."""
     spec = FieldSpec("landmark", 4)
     meshes = {"ellipsoid": ellipsoid(), "grid": flat_grid(9)}
-    expected = {name: spec.compute(v, f, 1) for name, (v, f) in meshes.items()}
+    expected = {name: as_stored(spec.compute(v, f, 1)) for name, (v, f) in meshes.items()}
     monkeypatch.setattr(FieldSpec, "compute_draws", lambda *a: pytest.fail("computed in the calling process"))
-    cache = FieldCache(tmp_path / "fields.zarr", spec)
+    cache = FieldCache(tmp_path / "fields", spec)
     cache.fill([(name, v, f, 1) for name, (v, f) in meshes.items()], jobs=2, progress=False)
     for name, fields in expected.items():
         np.testing.assert_array_equal(cache.get(name, 1), fields)
