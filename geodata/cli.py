@@ -111,7 +111,9 @@ def _list_options(fn):
     fn = click.option("--exclude", type=click.Path(exists=True, dir_okay=False), callback=_read_list,
                       help="Skip the files listed (paths relative to RAW_DIR, one a line, # comments).")(fn)
     return click.option("--include", type=click.Path(exists=True, dir_okay=False), callback=_read_list,
-                        help="Only the files listed (same format as --exclude).")(fn)
+                        help="Only the files listed (same format as --exclude). The tree is then not walked (a shard "
+                             "of a large catalog reads its list alone); a listed file that is missing is "
+                             "recorded as failed.")(fn)
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})

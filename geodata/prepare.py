@@ -9,6 +9,7 @@ import hashlib
 import contextlib
 import importlib.metadata
 import json
+import os
 import re
 import time
 from dataclasses import asdict, dataclass
@@ -65,14 +66,17 @@ def raw_root(raw_dir: str | Path) -> Path:
 
 
 def discover(raw_dir: str | Path, include: set[str] | None = None, exclude: set[str] | None = None) -> list[str]:
-    """Mesh files under raw_dir, recursively, as sorted relative POSIX paths; only those in
-    ``include`` (when given) and none in ``exclude``."""
+    """Mesh files under raw_dir, recursively, as sorted relative POSIX paths, none in ``exclude``; with
+    ``include``, the files it lists (the tree is not walked: a shard of a large catalog reads its list only)."""
     root = Path(raw_dir)
     if root.is_file():
         found = [root.name] if root.suffix.lower() in MESH_SUFFIXES else []
-    else:
-        found = sorted(p.relative_to(root).as_posix() for p in root.rglob("*")
-                       if p.is_file() and p.suffix.lower() in MESH_SUFFIXES)
+    elif include is not None:  # the list is the inputs: no walk of the tree (a listed file that is missing fails)
+        found = sorted(include)
+    else:  # os.walk: the directory entries' types, no stat of each file (a catalog has 50k of them)
+        found = sorted(Path(folder, name).relative_to(root).as_posix()
+                       for folder, _, names in os.walk(root, followlinks=True)
+                       for name in names if name.lower().endswith(MESH_SUFFIXES))
     return [s for s in found if (include is None or s in include) and s not in (exclude or ())]
 
 

@@ -44,3 +44,40 @@ def assert_same_arrays(a: dict, b: dict):
     assert a.keys() == b.keys()
     for key in a:
         assert a[key].dtype == b[key].dtype and np.array_equal(a[key], b[key]), key
+
+
+def synthetic_catalog(raw, out, n: int) -> list[str]:
+    """A scale store without running the stages: ``n`` input files (SYNSET/MODEL/models/model_normalized.obj,
+    each a few bytes of its own), one prepare ledger for them, and each published in the store's format as a
+    copy of one small mesh's zip (so the store holds ``n`` mesh files). Returns the mesh ids."""
+    import hashlib
+    import shutil
+
+    from geodata.prepare import ledger_name, mesh_id_of
+
+    store.create_store(out, {"pairs": 1})
+    v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], np.float32)
+    f = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], np.int32)
+    store.write_mesh(out, "template", {"vertices": v, "faces": f, "normals": v, "edges": f[:, :2],
+                                       "geodesic/pairs": np.array([[0, 1]], np.uint32),
+                                       "geodesic/distances": np.ones(1, np.float32)},
+                     {"source": "template.obj", "geometry_key": store.geometry_key(v, f), "n_vertices": 4,
+                      "n_pairs": 1})
+    template = store.mesh_file(out, "template")
+    inputs, ids = {}, []
+    for i in range(n):
+        source = f"{i % 50:08d}/{i:08x}/models/model_normalized.obj"
+        data = f"# model {i}\n".encode()
+        path = raw / source
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(data)
+        digest = hashlib.sha256(data).hexdigest()
+        mesh_id = mesh_id_of(source, digest)
+        shutil.copyfile(template, store.mesh_file(out, mesh_id))
+        stat = path.stat()
+        inputs[source] = {"sha256": digest, "mesh_id": mesh_id, "size": stat.st_size, "mtime_ns": stat.st_mtime_ns}
+        ids.append(mesh_id)
+    template.unlink()
+    store.write_ledger(out, ledger_name(raw, (0, 1), None, None),
+                       {"root": str(raw.resolve()), "shard": "0/1", "written": 0.0, "inputs": inputs})
+    return ids

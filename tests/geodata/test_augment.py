@@ -83,3 +83,5 @@ def test_include_exclude_lists(tmp_path):
     assert chosen == {"d/c.ply", "b.off"}
     assert discover(tmp_path, include=chosen) == ["b.off", "d/c.ply"]
     assert discover(tmp_path, exclude=chosen) == ["a.obj", "d/e.stl"]
+    # A list is the inputs (no walk): a listed file that is missing is kept, to be recorded as failed.
+    assert discover(tmp_path, include={"gone.obj", "b.off"}) == ["b.off", "gone.obj"]
