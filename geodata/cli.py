@@ -358,6 +358,26 @@ def augment(raw_dir, out_dir, variants, seed, jobs, include, exclude):
 
 
 @main.command()
+@click.argument("old", type=click.Path(exists=True, file_okay=False))
+@click.argument("new", type=click.Path(file_okay=False))
+def upgrade(old, new):
+    """Copy store OLD of format 1 (one folder per mesh, before geogegnn 0.2.0) into NEW, of format 2 (one zip per
+    mesh), keeping the mesh ids (so a training split stays the same). Resumable; OLD is left as it is.
+
+    Format-1 meshes have no input/ arrays (where each input vertex lies on the stored mesh): prepare the
+    inputs again into a new store for those."""
+    from geodata.upgrade import upgrade_store
+
+    _setup_logging(None)
+    try:
+        counts = upgrade_store(old, new, lambda items: progress_bar(items, desc="upgrade", unit="mesh", disable=None))
+    except store.StoreError as exc:
+        raise click.ClickException(str(exc)) from None
+    log.info("upgrade %s -> %s: %d meshes copied, %d already there, %d incomplete (not copied), %d failure records",
+             old, new, counts["meshes"], counts["skipped"], counts["incomplete"], counts["failures"])
+
+
+@main.command()
 @click.argument("out_dir", type=click.Path(file_okay=False))
 def examples(out_dir):
     """Write a few furniture-like triangle soups (table, chair, lamp, shelf, mug, open crate) to OUT_DIR.
