@@ -2,4 +2,4 @@
 from geodata.mesh import Mesh, MeshError
 
 __all__ = ["Mesh", "MeshError"]
-__version__ = "0.1.0"
+__version__ = "0.2.0"
