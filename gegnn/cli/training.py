@@ -58,8 +58,9 @@ def _blocks(ctx, param, value):
                    "GPU one per spare CPU core, at most 8 (an H100 needs 2-3 at batch 4: docs/gpu.md); "
                    "on a CPU 0.")
 @click.option("--resume", is_flag=True,
-              help="Continue RUN/last.safetensors (its own options): bitwise-exact on a CPU, on a GPU with "
-                   "--deterministic.")
+              help="Continue RUN/last.safetensors (its own options; STORE, and --val where given, from the command "
+                   "line: a moved or copied store is taken, another dataset refused by content): bitwise-exact on a "
+                   "CPU, on a GPU with --deterministic.")
 @click.option("--deterministic", is_flag=True,
               help="torch's deterministic algorithms: identical runs and resumes on a GPU too, where atomic "
                    "scatter-adds otherwise sum in a varying order (slower; CPU runs are deterministic anyway).")
@@ -100,7 +101,7 @@ def train(run_dir, no_rotate, init_ckpt, channels, blocks, aggr, no_edge_length,
           plain_grid_pool, euclidean_decoder, landmarks, landmark_no_embedding, landmark_no_euclidean, spectral,
           spectral_no_embedding, landmark_output, points, **options):
     """Train GeGnn on the geodata store STORE."""
-    from ..training.loop import TrainConfig
+    from ..training.loop import StoreMismatch, TrainConfig
     from ..training.loop import train as run_training
 
     # The other options are TrainConfig's fields by name (store, epochs, ..., deterministic).
@@ -113,7 +114,10 @@ def train(run_dir, no_rotate, init_ckpt, channels, blocks, aggr, no_edge_length,
                             landmark_embedding=not landmark_no_embedding,
                             landmark_euclidean=not landmark_no_euclidean, landmark_output=landmark_output,
                             spectral=spectral, spectral_embedding=not spectral_no_embedding, points=points, **extra)
-    run_training(cfg, model_cfg)
+    try:
+        run_training(cfg, model_cfg)
+    except StoreMismatch as exc:  # another dataset on --resume: one line, no traceback
+        raise click.ClickException(str(exc)) from None
 
 
 @click.command("eval")

@@ -50,7 +50,7 @@ import numpy as np
 from .landmarks import landmark_solver
 from .spectral import spectral_codes
 
-__all__ = ["FieldSpec", "FieldCache", "geometry_key", "LANDMARK_DRAWS"]
+__all__ = ["FieldSpec", "FieldCache", "geometry_key", "estimate_fill", "readable", "LANDMARK_DRAWS"]
 
 FORMAT = 2  # 1: a zarr group of float32 arrays, each with a "complete" attribute (before 2026-11-26)
 LANDMARK_DRAWS = 4  # landmark choices per training mesh (augmentation; each computed once, in the cache)
@@ -220,6 +220,26 @@ class FieldCache:
                     raise
         bar.close()
         return published
+
+
+def estimate_fill(todo: list, spec: FieldSpec, seconds_a_draw: float, vertices_measured: int
+                  ) -> tuple[int, int, float]:
+    """Entries, bytes on disk and CPU seconds of filling ``todo`` (as :meth:`FieldCache.fill` takes it):
+    bytes N x columns x the stored item size, and the .npy header's 128, an entry; seconds the measured
+    draw's (one of a mesh of ``vertices_measured`` vertices) scaled by N: a draw is a sparse solve per
+    landmark, about linear in N at these sizes (its factorization, shared by a mesh's draws, is not)."""
+    vertices = sum(len(t[1]) for t in todo)
+    nbytes = sum(len(t[1]) * spec.columns * np.dtype(spec.dtype).itemsize + 128 for t in todo)
+    return len(todo), nbytes, seconds_a_draw * vertices / max(vertices_measured, 1)
+
+
+def readable(value: float, unit: str) -> str:
+    """Bytes ("B": kB, MB, ... by 1000) or seconds ("s": min, h) in the largest unit that ``value`` reaches."""
+    step, units = (1000, ("B", "kB", "MB", "GB", "TB")) if unit == "B" else (60, ("s", "min", "h"))
+    k = 0
+    while k + 1 < len(units) and value >= step ** (k + 1):
+        k += 1
+    return f"{value / step ** k:.3g} {units[k]}"
 
 
 def _one_thread() -> None:

@@ -9,7 +9,10 @@ from __future__ import annotations
 import contextlib
 import csv
 import dataclasses
+import hashlib
+import json
 import logging
+import os
 import math
 import time
 from dataclasses import dataclass
@@ -24,19 +27,21 @@ from geodata.progress import progress_bar
 from ..checkpoint import load_checkpoint, save_checkpoint
 from ..config import GeGnnConfig
 from ..distributed import Dist, all_sum, barrier, setup_distributed
-from ..fields.cache import FieldCache, FieldSpec
+from ..fields.cache import FieldCache, FieldSpec, estimate_fill, readable
 from ..fitting import show_loss
 from ..metrics import pair_errors, relative_error
 from ..model import GeGnn
-from .data import VAL_EPOCH, BatchDataset, EpochSampler, GeodesicStore, split_meshes
+from .data import VAL_EPOCH, BatchDataset, EpochSampler, GeodesicStore, mesh_hash, split_meshes
 from .devices import auto_workers, cpus_per_process, pick_device, set_deterministic
 from .warmup import warm_decoder
 
-__all__ = ["TrainConfig", "train", "evaluate_store", "lr_at"]
+__all__ = ["TrainConfig", "train", "evaluate_store", "lr_at", "store_fingerprint", "StoreMismatch"]
 
 METRICS = ["epoch", "step", "lr", "train_mre", "val_mre", "seconds"]
-# Options a resumed run takes from the command line ("landmark_cache": field_cache's name in older runs).
-RESUME_KEEPS = ("epochs", "device", "workers", "field_cache", "landmark_cache")
+# Options a resumed run takes from the command line ("landmark_cache": field_cache's name in older runs; the
+# store: moved, or copied to a node's scratch, it is checked by content, store_fingerprint), --val where given.
+RESUME_KEEPS = ("store", "epochs", "device", "workers", "field_cache", "landmark_cache")
+STORES_FILE = "stores.json"  # in the run: each store's fingerprint, parameters and mesh ids (what a resume checks)
 DECODER_KINDS = ("decoder", "landmark", "spectral")  # GeGnnConfig fields that choose the decoder (name prefixes)
 WARMUP_LR = 1e-3  # decoder warm-up: a small MLP on fixed codes (the network's --lr is usually lower)
 VAL_WORKERS = 2  # loader processes of validation, at most (each holds its meshes while training runs)
@@ -204,7 +209,8 @@ def train(cfg: TrainConfig, model_config: GeGnnConfig | None = None) -> list[dic
     resume = load_checkpoint(run / "last.safetensors") if cfg.resume and (run / "last.safetensors").exists() \
         else None
     if resume is not None:  # continue with the run's own options
-        saved = {k: v for k, v in resume.metadata["train_config"].items() if k not in RESUME_KEEPS}
+        keeps = RESUME_KEEPS + (("val_store",) if cfg.val_store else ())
+        saved = {k: v for k, v in resume.metadata["train_config"].items() if k not in keeps}
         cfg = dataclasses.replace(cfg, **saved)
     previous = torch.are_deterministic_algorithms_enabled()
     set_deterministic(previous or cfg.deterministic)
@@ -229,8 +235,16 @@ def _train(cfg: TrainConfig, model_config, resume, run: Path, device, ctx: Dist,
     torch.manual_seed(cfg.seed)
     model, optimizer, start_epoch, step, best = build_model(cfg, model_config, resume, device, log)
     store = GeodesicStore(cfg.store, cfg.distance)
-    if cfg.val_store:
-        train_ids, val_ids = store.mesh_ids, GeodesicStore(cfg.val_store, cfg.distance).mesh_ids
+    val_store = GeodesicStore(cfg.val_store, cfg.distance) if cfg.val_store else None
+    stores = {"store": store_fingerprint(store), "val_store": val_store and store_fingerprint(val_store)}
+    if resume is not None:
+        check_stores(resume.metadata.get("stores"), stores, run, cfg, log)
+    if ctx.main:  # the run's record of them (whole or not at all), to say what differs on a resume
+        record = {k: v and {"path": getattr(cfg, k), **v} for k, v in stores.items()}
+        (run / ".stores.tmp").write_text(json.dumps(record))
+        os.replace(run / ".stores.tmp", run / STORES_FILE)
+    if val_store is not None:
+        train_ids, val_ids = store.mesh_ids, val_store.mesh_ids
     else:
         train_ids, val_ids = split_meshes(store.mesh_ids, cfg.val_fraction)
     if not train_ids:
@@ -286,7 +300,8 @@ def _train(cfg: TrainConfig, model_config, resume, run: Path, device, ctx: Dist,
             # Plotting costs ~0.5 s: at most every 30 s, and always after the last epoch.
             plot = epoch == cfg.epochs - 1 or time.perf_counter() - last_plot > 30
             last_plot = time.perf_counter() if plot else last_plot
-            save_run(run, model, optimizer, cfg, epoch, step, best, rows, improved, plot)
+            save_run(run, model, optimizer, cfg, epoch, step, best, rows, improved, plot,
+                     {k: v and v["sha256"] for k, v in stores.items()})
     return rows
 
 
@@ -347,9 +362,11 @@ def load_matching(model, state: dict) -> list[str]:
     return [k for k in own if k not in matching]
 
 
-def save_run(run: Path, model, optimizer, cfg, epoch, step, best, rows, improved, plot: bool) -> None:
+def save_run(run: Path, model, optimizer, cfg, epoch, step, best, rows, improved, plot: bool,
+             stores: dict | None = None) -> None:
+    """Metrics, curves and checkpoints; ``stores``: each store's content fingerprint (None: not given)."""
     meta = {"trainer": {"epoch": epoch, "step": step, "best": best},
-            "train_config": dataclasses.asdict(cfg), "metrics": rows[-1]}
+            "train_config": dataclasses.asdict(cfg), "metrics": rows[-1], "stores": stores or {}}
     if improved:
         save_checkpoint(run / "best.safetensors", model, metadata=meta)
     # last.safetensors is the resume point: written last, after metrics, so a kill between the two
@@ -358,6 +375,42 @@ def save_run(run: Path, model, optimizer, cfg, epoch, step, best, rows, improved
     if plot:
         plot_curves(run, rows)
     save_checkpoint(run / "last.safetensors", model, optimizer, rng_state(), metadata=meta)
+
+
+class StoreMismatch(ValueError):
+    """``--resume`` given a store whose content is not the run's (one line: what differs)."""
+
+
+def store_fingerprint(store: GeodesicStore) -> dict:
+    """A store's content as a run records it: ``sha256`` of its parameters and its sorted committed mesh
+    ids (JSON, sorted keys), and those parameters and ids, to say what differs. Its path is no part of it:
+    a store moved or copied keeps its fingerprint."""
+    content = {"params": store.root.attrs.get("params"), "mesh_ids": sorted(store.mesh_ids)}
+    return {"sha256": hashlib.sha256(json.dumps(content, sort_keys=True).encode()).hexdigest(), **content}
+
+
+def check_stores(saved: dict | None, now: dict, run: Path, cfg: TrainConfig, log) -> None:
+    """Refuse a resume whose stores are not the run's by content (:class:`StoreMismatch`), saying what
+    differs from the run's own record (RUN/stores.json)."""
+    if saved is None:  # a checkpoint from before fingerprints: nothing to compare with
+        log.info("--resume: the checkpoint records no store fingerprint (an older run): the stores are not checked")
+        return
+    record = json.loads((run / STORES_FILE).read_text()) if (run / STORES_FILE).exists() else {}
+    for name, fingerprint in now.items():
+        if saved.get(name) == (fingerprint and fingerprint["sha256"]):
+            continue
+        if saved.get(name) is None:
+            raise StoreMismatch("--resume: this run validated on a split of its STORE: resume it without --val")
+        where = f"--resume: {'STORE' if name == 'store' else '--val'} {getattr(cfg, name)} is not the store this run"
+        old = record.get(name) or {}
+        if old.get("sha256") != saved[name]:  # no record of the run's store: its fingerprint alone
+            raise StoreMismatch(f"{where} trained on (another content fingerprint)")
+        ids, old_ids = set(fingerprint["mesh_ids"]), set(old["mesh_ids"])
+        params, old_params = fingerprint["params"] or {}, old["params"] or {}
+        changed = sorted(k for k in {**params, **old_params} if params.get(k) != old_params.get(k))
+        differs = [f"{len(ids - old_ids)} mesh(es) added"] * bool(ids - old_ids) + [f"{len(old_ids - ids)} missing"] \
+            * bool(old_ids - ids) + [f"other params ({', '.join(changed)})"] * bool(changed)
+        raise StoreMismatch(f"{where} trained on ({old['path']}): {', '.join(differs) or 'another content'}")
 
 
 def make_loader(dataset, sampler, workers: int, device, persistent: bool = True):
@@ -387,29 +440,43 @@ def single_mesh_keys(mesh_ids: list[str], ctx: Dist) -> list[tuple]:
 
 def fill_field_cache(path: str, spec: FieldSpec, work: list[tuple], ctx: Dist, device, log) -> None:
     """Compute the fields that ``path`` lacks, for ``work``: (dataset, mesh ids, seeds) triples, keyed
-    as the datasets' loaders look them up. Every rank takes the meshes whose key falls to it (so two ids
-    of one content are one task, on one rank: no two ranks write one key) and the CPU cores of its share
-    of the node; the fields then serve every loader worker and rank (:mod:`gegnn.fields.cache`)."""
+    as the datasets' loaders look them up, with the CPU cores of this rank's share of the node; the
+    fields then serve every loader worker and rank (:mod:`gegnn.fields.cache`).
+
+    Every rank takes the meshes whose id falls to it (``mesh_hash(m) % world``), reads their keys (an
+    attribute recorded at prepare time) and the geometry of those with missing fields only: a start or
+    resume on a filled cache costs a key and a name lookup per entry of the rank's share, whatever the
+    store's size. Two ids of one content on two ranks may both compute it; the first to publish wins.
+    Before computing, the log says how many fields, bytes and seconds (:func:`~gegnn.fields.cache.estimate_fill`)."""
     cache = FieldCache(path, spec)
     if ctx.main:
         cache.create()  # once, before the ranks write into it
     barrier(ctx)
-    todo, seen = [], set()
+    wanted = {}  # key -> (dataset, mesh id, seeds): two ids of one content are one task
     for dataset, mesh_ids, seeds in work:
         for m in mesh_ids:
-            stored = dataset.store.geometry(m)
-            key = stored.key  # the stored mesh's: a point cloud's too
-            if key in seen or int(key, 16) % ctx.world != ctx.rank:
-                continue
-            seen.add(key)
-            lacking = [s for s in seeds if not cache.has(key, s)]
-            if lacking:
-                g = dataset.as_input(stored)
-                todo += [(key, g.vertices, g.faces, s) for s in lacking]
-    t0 = time.perf_counter()
-    cache.fill(todo, jobs=cpus_per_process(), progress=ctx.main)
-    total = all_sum([len(todo)], ctx, device)[0]  # a collective: the ranks meet here
-    log.info(f"{spec.kind} fields: {int(total)} computed in {time.perf_counter() - t0:.1f} s, cached in {path}")
+            if mesh_hash(m) % ctx.world == ctx.rank:
+                wanted.setdefault(dataset.store.key(m), (dataset, m, set()))[2].update(seeds)
+    todo = []
+    for key, (dataset, m, seeds) in wanted.items():
+        lacking = sorted(s for s in seeds if not cache.has(key, s))
+        if lacking:
+            g = dataset.as_input(dataset.store.geometry(m))
+            todo += [(key, g.vertices, g.faces, s) for s in lacking]
+    t0, jobs = time.perf_counter(), cpus_per_process()
+    first = [t for t in todo if t[0] == todo[0][0]] if todo else []
+    published = cache.fill(first, progress=False)  # one mesh, timed: the estimate's seconds a draw
+    a_draw = (time.perf_counter() - t0) / max(len(first), 1)
+    entries, nbytes, seconds = all_sum(list(estimate_fill(todo, spec, a_draw, len(first[0][1]) if first else 1)),
+                                       ctx, device)
+    if entries:
+        log.info(f"{spec.kind} fields: {int(entries)} to compute ({spec.name}), ~{readable(nbytes, 'B')} in {path}, "
+                 f"~{readable(seconds / (jobs * ctx.world), 's')} with {jobs} process(es) on each of {ctx.world} "
+                 f"rank(s) (one mesh's draws measured: {a_draw:.3f} s each)")
+    published += cache.fill(todo[len(first):], jobs=jobs, progress=ctx.main)
+    published, computed = all_sum([published, len(todo)], ctx, device)  # a collective: the ranks meet here
+    log.info(f"{spec.kind} fields: {int(published)} computed in {time.perf_counter() - t0:.1f} s, cached in {path}"
+             + f" ({int(computed - published)} more published first by another rank or run)" * (computed > published))
 
 
 # -- evaluation (the paper's protocol: all stored pairs) ------------------------------------------------

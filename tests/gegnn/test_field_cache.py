@@ -120,7 +120,7 @@ def test_a_field_cache_of_the_old_zarr_format_is_refused_by_name(tmp_path):
     import zarr
 
     zarr.open_group(str(tmp_path / "old"), mode="w").attrs["gegnn_landmark_cache"] = 1
-    with pytest.raises(ValueError, match="old: a field cache of format 1 .zarr.*delete it or give another --field-cache"):
+    with pytest.raises(ValueError, match="old: a field cache of format 1 .zarr.*delete it or give another --field"):
         FieldCache(tmp_path / "old", FieldSpec("landmark", 3)).has("mesh", 0)
 
 
@@ -199,3 +199,20 @@ def test_a_fill_with_jobs_computes_in_fresh_processes(tmp_path, monkeypatch):
     cache.fill([(name, v, f, 1) for name, (v, f) in meshes.items()], jobs=2, progress=False)
     for name, fields in expected.items():
         np.testing.assert_array_equal(cache.get(name, 1), fields)
+
+
+def test_a_fills_estimate_is_the_bytes_it_writes_and_seconds_scaled_by_vertices(tmp_path):
+    from gegnn.fields.cache import estimate_fill, readable
+
+    spec = FieldSpec("landmark", 6)
+    (ve, fe), (vg, fg) = ellipsoid(), flat_grid(9)
+    todo = [("e", ve, fe, 0), ("e", ve, fe, 1), ("g", vg, fg, 0)]
+    entries, nbytes, seconds = estimate_fill(todo, spec, 0.5, len(ve))
+    FieldCache(tmp_path / "c", spec).fill(todo, progress=False)
+    written = sum(f.stat().st_size for f in (tmp_path / "c" / "k6").rglob("*.npy"))
+    assert entries == 3 and nbytes == written == 3 * 128 + (2 * len(ve) + len(vg)) * 6 * 2  # float16
+    assert seconds == 0.5 * (2 * len(ve) + len(vg)) / len(ve)
+    codes = FieldSpec("spectral", 8)
+    assert estimate_fill(todo[:1], codes, 0.1, len(ve))[1] == 128 + len(ve) * 9 * 4  # float32, m + 1 columns
+    assert [readable(999, "B"), readable(2.5e9, "B"), readable(59, "s"), readable(90, "s"), readable(7200, "s")] == \
+        ["999 B", "2.5 GB", "59 s", "1.5 min", "2 h"]

@@ -1,5 +1,6 @@
 import csv
 import dataclasses
+import json
 import logging
 import re
 import socket
@@ -343,8 +344,9 @@ def _ddp_kinds_worker(rank, ports, store, out):
 def test_ddp_trains_every_model_kind_from_a_cache_both_ranks_filled(tmp_path):
     """Two gloo processes, two epochs each (several steps: DDP raises on the second step where a parameter
     got no gradient it did not expect), for the paper, landmark, spectral (with and without embeddings) and
-    point-cloud models; the store holds one mesh twice under two ids, which one rank computes once. The
-    loaders never compute a field (FieldSpec.compute raises in both ranks)."""
+    point-cloud models; the store holds one mesh twice under two ids, whose fields are stored once (the ranks
+    share meshes by id: both may compute them, the first to publish wins, and the log counts what was stored).
+    The loaders never compute a field (FieldSpec.compute raises in both ranks)."""
     from gegnn_stores import FOUR_MESHES, write_store
 
     from gegnn.training.data import GeodesicStore
@@ -363,3 +365,106 @@ def test_ddp_trains_every_model_kind_from_a_cache_both_ranks_filled(tmp_path):
             assert f"landmark fields: {4 * len(train_keys) + len(val_keys)} computed" in log
         elif options.get("spectral"):
             assert f"spectral fields: {len(train_keys | val_keys)} computed" in log
+
+
+# -- --resume on the store given: moved or copied it continues, another dataset is refused ----------------
+def _killed_after_epoch_0(cfg, monkeypatch, model_config=None):
+    original = gtrain.save_run
+
+    def save_then_die(*args, **kw):
+        original(*args, **kw)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(gtrain, "save_run", save_then_die)
+    with pytest.raises(KeyboardInterrupt):
+        train(cfg, model_config or small_config())
+    monkeypatch.setattr(gtrain, "save_run", original)
+
+
+def test_a_resumed_run_trains_on_the_store_given_moved_or_copied(tiny_store, tmp_path, monkeypatch):
+    """The store and its --val store renamed after epoch 0: the resume reads them where they are now, and
+    ends as the uninterrupted run (the fingerprints are of the content, not the path)."""
+    import shutil
+
+    full = train(config(tiny_store, tmp_path / "full"), small_config())
+    store, val = (str(shutil.copytree(tiny_store, tmp_path / name)) for name in ("a.zarr", "v.zarr"))
+    run = tmp_path / "run"
+    _killed_after_epoch_0(config(store, run), monkeypatch)
+    moved = (tmp_path / "a.zarr").rename(tmp_path / "scratch.zarr")
+    resumed = train(config(str(moved), run, resume=True), small_config())
+    assert [{k: v for k, v in r.items() if k != "seconds"} for r in resumed] == \
+        [{k: v for k, v in r.items() if k != "seconds"} for r in full]
+    assert load_checkpoint(run / "last.safetensors").metadata["train_config"]["store"] == str(moved)
+    record = json.loads((run / "stores.json").read_text())
+    assert record["store"]["path"] == str(moved) and record["val_store"] is None
+    assert record["store"]["mesh_ids"] == ["ellipsoid_a", "ellipsoid_b", "grid", "sphere"]
+
+    # --val too: taken from the command line where given, else the run's own
+    run = tmp_path / "val-run"
+    _killed_after_epoch_0(config(str(moved), run, val_store=str(val)), monkeypatch)
+    other_val = (tmp_path / "v.zarr").rename(tmp_path / "v2.zarr")
+    rows = train(config(str(moved), run, val_store=str(other_val), resume=True, epochs=3), small_config())
+    assert [r["epoch"] for r in rows] == ["0", "1", "2"]
+    assert "4 train / 4 val meshes" in (run / "train.log").read_text()
+
+
+def test_a_resume_on_another_dataset_is_refused_in_one_line_saying_what_differs(tiny_store, one_mesh_store,
+                                                                               tmp_path, monkeypatch):
+    from click.testing import CliRunner
+    from gegnn_stores import FOUR_MESHES, write_store
+
+    from gegnn.cli import main
+
+    run = tmp_path / "run"
+    _killed_after_epoch_0(config(tiny_store, run), monkeypatch)
+    three = write_store(tmp_path / "three.zarr", {k: v for k, v in FOUR_MESHES.items() if k != "grid"})
+
+    def resume(store, *extra):
+        return CliRunner().invoke(main, ["train", store, "--run", str(run), "--resume", "--device", "cpu", *extra])
+
+    result = resume(three)
+    assert result.exit_code == 1 and result.output == (
+        f"Error: --resume: STORE {three} is not the store this run trained on ({tiny_store}): 1 missing\n")
+    result = resume(one_mesh_store)  # one mesh of its own, the four missing, 16 sources a mesh instead of 8
+    assert result.output == (f"Error: --resume: STORE {one_mesh_store} is not the store this run trained on "
+                             f"({tiny_store}): 1 mesh(es) added, 4 missing, other params (pairs)\n")
+    result = resume(tiny_store, "--val", tiny_store)
+    assert result.output == "Error: --resume: this run validated on a split of its STORE: resume it without --val\n"
+    assert load_checkpoint(run / "last.safetensors").metadata["trainer"]["epoch"] == 0  # nothing trained
+    (run / "stores.json").unlink()  # the run's record lost: the fingerprint alone still tells
+    assert resume(three).output == (f"Error: --resume: STORE {three} is not the store this run trained on "
+                                    "(another content fingerprint)\n")
+
+
+def test_each_rank_fills_its_share_by_mesh_id_reading_only_meshes_with_missing_fields(tiny_store, tmp_path,
+                                                                                     monkeypatch):
+    """Two ranks, in turn (the collectives stubbed): each reads the geometry of its own meshes (by id hash)
+    and only while their fields are missing; the next start reads none. The log says first how many fields,
+    bytes and seconds the fill will take."""
+    from gegnn.fields.cache import FieldCache
+    from gegnn.training.data import GeodesicStore, mesh_hash
+
+    monkeypatch.setattr(gtrain, "barrier", lambda ctx: None)
+    monkeypatch.setattr(gtrain, "all_sum", lambda values, ctx, device: values)
+    reads, geometry = [], GeodesicStore.geometry
+    monkeypatch.setattr(GeodesicStore, "geometry", lambda self, m: reads.append(m) or geometry(self, m))
+    spec, path = FieldSpec("landmark", 4), str(tmp_path / "fields")
+    ds = BatchDataset(tiny_store, "geodesic", 0, 200, False, 5, 1 / 16, 3 / 16, spec, path)
+    ids, lines = ds.store.mesh_ids, []
+    log = logging.getLogger("test.fill")
+    monkeypatch.setattr(log, "info", lines.append)
+    shares = [[m for m in ids if mesh_hash(m) % 2 == rank] for rank in (0, 1)]
+    assert all(shares)  # the four meshes fall to both ranks
+    for rank, share in enumerate(shares):
+        reads.clear()
+        gtrain.fill_field_cache(path, spec, [(ds, ids, range(3))], Dist(rank, 2), torch.device("cpu"), log)
+        assert sorted(reads) == share
+        assert lines[-2].startswith(f"landmark fields: {3 * len(share)} to compute (k4), ~")
+        assert "with " in lines[-2] and lines[-1].startswith(f"landmark fields: {3 * len(share)} computed in ")
+    cache = FieldCache(path, spec)
+    assert all(cache.has(ds.store.key(m), seed) for m in ids for seed in range(3))
+    reads.clear()
+    for rank in (0, 1):  # a resume: every field there, no geometry read, no estimate
+        gtrain.fill_field_cache(path, spec, [(ds, ids, range(3))], Dist(rank, 2), torch.device("cpu"), log)
+        assert lines[-1].startswith("landmark fields: 0 computed")
+    assert reads == []
