@@ -117,8 +117,9 @@ def _child(fn, args, write_fd: int, max_memory: int | None) -> None:
         if max_memory is not None:
             hard = resource.getrlimit(resource.RLIMIT_DATA)[1]
             limit = max_memory if hard == resource.RLIM_INFINITY else min(max_memory, hard)
-            resource.setrlimit(resource.RLIMIT_DATA, (limit, hard))
-            out_of_memory = _over_limit(max_memory)
+            with contextlib.suppress(ValueError, OSError):  # a platform that refuses it: the mesh runs unlimited
+                resource.setrlimit(resource.RLIMIT_DATA, (limit, hard))
+                out_of_memory = _over_limit(max_memory)
         try:
             message = ("result", fn(*args))
         except MeshError as exc:

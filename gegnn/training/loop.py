@@ -392,7 +392,7 @@ def store_fingerprint(store: GeodesicStore) -> dict:
 def check_stores(saved: dict | None, now: dict, run: Path, cfg: TrainConfig, log) -> None:
     """Refuse a resume whose stores are not the run's by content (:class:`StoreMismatch`), saying what
     differs from the run's own record (RUN/stores.json)."""
-    if saved is None:  # a checkpoint from before fingerprints: nothing to compare with
+    if not saved:  # a checkpoint from before fingerprints: nothing to compare with
         log.info("--resume: the checkpoint records no store fingerprint (an older run): the stores are not checked")
         return
     record = json.loads((run / STORES_FILE).read_text()) if (run / STORES_FILE).exists() else {}
