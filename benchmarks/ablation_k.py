@@ -19,13 +19,14 @@ import dataclasses
 from pathlib import Path
 
 import numpy as np
-import zarr
 
 from gegnn import GeGnn
 from gegnn.training.loop import evaluate_store
+from geodata import store as geostore
 
 from bench_gegnn import heat_pairs, timed  # benchmarks/ is on sys.path when a script there runs
 from machine import cpu_description
+from stores import mesh_id
 
 
 def load_model(spec: str) -> tuple[str, GeGnn]:
@@ -46,12 +47,13 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("store")
     ap.add_argument("models", nargs="*", default=[f"shipped@{k}" for k in (128, 256, 512, 1024)])
-    ap.add_argument("--mesh", default="dragon-4af53808")
+    ap.add_argument("--mesh", default="dragon-4af53808", help="a mesh id of the store, or a unique prefix of one")
     ap.add_argument("--out", help="also write the table to this file (for bench_results.py --landmarks-table)")
     args = ap.parse_args()
     print(f"CPU: {cpu_description()}", flush=True)
-    g = zarr.open_group(f"{args.store}/meshes/{args.mesh}", mode="r")
-    v, f = g["vertices"][:].astype(np.float64), g["faces"][:].astype(np.int64)
+    args.mesh = mesh_id(args.store, args.mesh)
+    with geostore.read_mesh(args.store, args.mesh) as g:
+        v, f = g["vertices"][:].astype(np.float64), g["faces"][:].astype(np.int64)
     rng = np.random.default_rng(0)
     i, j = rng.integers(0, len(v), 1_000_000), rng.integers(0, len(v), 1_000_000)
     heat = timed(lambda: heat_pairs(v, f, i, j), repeat=1)[0]

@@ -41,26 +41,22 @@ def timed(fn, repeat=3):
 
 
 def write_store(path, meshes: dict, pairs=600_000, seed=0):
-    """Meshes {id: (V, F)} in the store layout; distances are Euclidean stand-ins (only throughput
-    matters here)."""
-    import zarr
+    """Meshes {id: (V, F)} in a new store at `path` (geodata.store's layout); distances are Euclidean
+    stand-ins (only throughput matters here)."""
+    from geodata import store as geostore
 
     rng = np.random.default_rng(seed)
-    root = zarr.open_group(path, mode="w")
-    root.attrs["geodata_format"] = 1
-    group = root.create_group("meshes")
+    geostore.create_store(path, {"benchmark": "bench_gegnn.write_store", "pairs": pairs, "seed": seed})
     for mesh_id, (v, f) in meshes.items():
         v = normalize(Mesh(v, f)).vertices
-        g = group.create_group(mesh_id)
-        for name, data in [("vertices", v.astype(np.float32)), ("faces", f.astype(np.int32)),
-                           ("normals", vertex_normals(Mesh(v, f)).astype(np.float32)),
-                           ("edges", unique_edges(f).astype(np.int32))]:
-            g.create_array(name, data=data)
         p = rng.integers(0, len(v), (pairs, 2)).astype(np.uint32)
-        geo = g.create_group("geodesic")
-        geo.create_array("pairs", data=p)
-        geo.create_array("distances", data=np.linalg.norm(v[p[:, 0]] - v[p[:, 1]], axis=1).astype(np.float32))
-        g.attrs["status"] = "ok"
+        arrays = {"vertices": v.astype(np.float32), "faces": f.astype(np.int32),
+                  "normals": vertex_normals(Mesh(v, f)).astype(np.float32),
+                  "edges": unique_edges(f).astype(np.int32), "geodesic/pairs": p,
+                  "geodesic/distances": np.linalg.norm(v[p[:, 0]] - v[p[:, 1]], axis=1).astype(np.float32)}
+        geostore.write_mesh(path, mesh_id, arrays, {
+            "source": mesh_id, "geometry_key": geostore.geometry_key(arrays["vertices"], f),
+            "n_vertices": len(v), "n_faces": len(f), "n_pairs": pairs})
 
 
 def bench_training(v, f, channels, steps, pairs_per_mesh):

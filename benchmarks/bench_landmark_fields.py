@@ -1,11 +1,12 @@
 """Landmark fields (K farthest-point landmarks and their heat-method distance fields) on CPU: potpourri3d's
 solver against gegnn.fields.heat, exact sequential farthest-point sampling and a batched variant.
 
-    python benchmarks/bench_landmark_fields.py [MESH_DIR] [--k 128] [--batch 8 16] [--repeat 3]
+    python benchmarks/bench_landmark_fields.py [STORE] [--mesh ID] [--k 128] [--batch 8 16] [--repeat 3]
 
-MESH_DIR is a store mesh group (arrays ``vertices``, ``faces``); default data/val.zarr/meshes/dragon-4af53808
-when it exists. A synthetic 5,000-vertex torus always runs. The reference (potpourri3d, one
-``compute_distance`` a landmark) is timed in the same run; times are the best of --repeat, one thread.
+STORE is a geodata store and --mesh one of its meshes (an id or a unique prefix of one; default
+dragon-4af53808); without STORE, data/val.zarr's dragon when it is there (STORE/meshes/ID, a format-1
+mesh path, is read as STORE and --mesh ID). A synthetic 5,000-vertex torus always runs. The reference
+(potpourri3d, one ``compute_distance`` a landmark) is timed in the same run; times are the best of --repeat, one thread.
 
 Batched variant (not what landmark_fields does): rounds of B landmarks, the first of a round the exact
 farthest vertex, the others chosen greedily with the Euclidean distance to the round's earlier picks as a
@@ -18,18 +19,22 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
+from pathlib import Path
 
 import numpy as np
 import trimesh
 from bench_gegnn import timed  # benchmarks/ is on sys.path when a script there runs
 from machine import cpu_description  # benchmarks/ is on sys.path when a script there runs
+from stores import MeshIdError, mesh_id
 
+from geodata import store as geostore
 from geodata.mesh import unique_edges
 from gegnn.fields.heat import HeatDistance
 from gegnn.fields.landmarks import (T_COEF, _farthest, farthest_point_fields, graph_farthest_points, landmark_columns,
                                     landmark_fields)
 
-DRAGON = "data/val.zarr/meshes/dragon-4af53808"
+STORE, DRAGON = "data/val.zarr", "dragon-4af53808"
 
 
 def torus_mesh():
@@ -37,11 +42,25 @@ def torus_mesh():
     return np.asarray(m.vertices), np.asarray(m.faces)
 
 
-def store_mesh(path):
-    import zarr
+def store_mesh(store, mesh):
+    with geostore.read_mesh(store, mesh) as g:
+        return np.asarray(g["vertices"][:], dtype=np.float64), np.asarray(g["faces"][:], dtype=np.int64)
 
-    g = zarr.open_group(path, mode="r")
-    return np.asarray(g["vertices"][:], dtype=np.float64), np.asarray(g["faces"][:], dtype=np.int64)
+
+def pick_mesh(store, mesh) -> tuple[str, str] | None:
+    """(store, mesh id) of the command line's STORE and --mesh; None where neither is given and data/val.zarr's
+    dragon is not there."""
+    if store is not None and Path(store).parent.name == "meshes":  # STORE/meshes/ID: a format-1 mesh path
+        store, mesh = str(Path(store).parent.parent), mesh or Path(store).name
+    if store is not None:
+        return store, mesh_id(store, mesh or DRAGON)
+    if mesh is not None:
+        return STORE, mesh_id(STORE, mesh)
+    try:
+        return (STORE, mesh_id(STORE, DRAGON)) if os.path.isdir(STORE) else None
+    except (MeshIdError, geostore.StoreError) as exc:
+        print(f"{STORE}: {exc}; only the torus runs", file=sys.stderr)
+        return None
 
 
 def potpourri3d_fps(v, f, k, first):
@@ -136,8 +155,8 @@ def bench_mesh(name, v, f, k, batches, repeat):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("mesh", nargs="?", default=DRAGON if os.path.isdir(DRAGON) else None,
-                    help="store mesh group (vertices, faces)")
+    ap.add_argument("store", nargs="?", help=f"a geodata store (default {STORE} where it holds {DRAGON})")
+    ap.add_argument("--mesh", help=f"a mesh id of the store, or a unique prefix of one (default {DRAGON})")
     ap.add_argument("--k", type=int, default=128)
     ap.add_argument("--batch", type=int, nargs="*", default=[8, 16])
     ap.add_argument("--repeat", type=int, default=3)
@@ -149,8 +168,9 @@ def main():
     except ImportError:
         pass
     print(f"CPU: {cpu_description()}, {os.cpu_count()} cores; load average {os.getloadavg()[0]:.1f}")
-    if args.mesh:
-        bench_mesh(os.path.basename(args.mesh.rstrip("/")), *store_mesh(args.mesh), args.k, args.batch, args.repeat)
+    picked = pick_mesh(args.store, args.mesh)
+    if picked:
+        bench_mesh(picked[1], *store_mesh(*picked), args.k, args.batch, args.repeat)
     bench_mesh("torus (trimesh.creation.torus)", *torus_mesh(), args.k, args.batch, args.repeat)
 
 

@@ -33,6 +33,7 @@ import torch
 from gegnn import GeGnn
 from machine import cpu_description  # benchmarks/ is on sys.path when a script there runs
 from gegnn.training.data import GeodesicStore
+from geodata import store as geostore
 
 KINDS = ("clean", "noisy", "density", "2k", "surface", "normals")
 NOISE = 0.005       # of the longest bounding-box side
@@ -118,15 +119,19 @@ def main():
         for kind in args.kinds:
             pick = np.random.default_rng(0)
             if kind == "surface":  # `geodata points` samples (8k, 32k, ...): their own exact pairs
-                sub = store.root[f"meshes/{mesh_id}/points"]
-                points = np.asarray(sub["xyz"][:], dtype=np.float64)
-                ok = pick.permutation(sub["pairs"].shape[0])[:args.pairs]
-                local, truth = np.asarray(sub["pairs"][:], dtype=np.int64)[ok], np.asarray(sub["distances"][:])[ok]
-                face, bary = np.asarray(sub["face"][:], dtype=np.int64), np.asarray(sub["bary"][:], dtype=np.float64)
+                with geostore.read_mesh(args.store, mesh_id, "points") as sub:
+                    points = np.asarray(sub["xyz"][:], dtype=np.float64)
+                    ok = pick.permutation(sub["pairs"].shape[0])[:args.pairs]
+                    local, truth = np.asarray(sub["pairs"][:], dtype=np.int64)[ok], np.asarray(sub["distances"][:])[ok]
+                    face, bary = (np.asarray(sub["face"][:], dtype=np.int64),
+                                  np.asarray(sub["bary"][:], dtype=np.float64))
                 reference = mesh_emb.surface_distance(face[local[:, 0]], bary[local[:, 0]], face[local[:, 1]],
                                                       bary[local[:, 1]])
             else:
-                points, keep = make_cloud(g.vertices, kind, np.random.default_rng([len(mesh_id), KINDS.index(kind)]))
+                # Seeded by the length of the mesh's format-1 id (<stem>-<8 hex digits>), as before format 2's
+                # longer ids: the same clouds as the published tables.
+                id1 = len(mesh_id.rsplit("-", 1)[0]) + 9
+                points, keep = make_cloud(g.vertices, kind, np.random.default_rng([id1, KINDS.index(kind)]))
                 index = np.full(len(g.vertices), -1)
                 index[keep] = np.arange(len(keep))
                 ok = np.flatnonzero((index[pairs] >= 0).all(axis=1) & (pairs[:, 0] != pairs[:, 1]))

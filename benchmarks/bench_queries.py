@@ -4,7 +4,8 @@ random pairs, the whole distance matrix, and points inside faces.
     python benchmarks/bench_queries.py [STORE] [--mesh ID] [--only queries,matrix,surface]
 
 STORE is a validation store of `pipelines/pretrained/data.sh` (default data/val.zarr); --mesh picks the
-mesh (default dragon-4af53808, 5,224 vertices, the largest held-back one). Sections:
+mesh (an id or a unique prefix of one; default dragon-4af53808, 5,224 vertices, the largest held-back one).
+Sections:
   - queries: precomputation (landmark fields, network) and 1M random pairs, against the heat method for
     the same pairs (potpourri3d, one field per distinct source, factorization included) and against the
     torch decoder path the fused kernel replaced; the model's error on the mesh's stored pairs.
@@ -25,24 +26,27 @@ import time
 
 import numpy as np
 import torch
-import zarr
 
 from gegnn import GeGnn
 from gegnn.decoders import PairDecoder
 from gegnn.queries.embedding import Embedding
 from gegnn.fields.landmarks import landmark_fields
 from gegnn.metrics import METRIC_EPS
+from geodata import store as geostore
 from geodata.geodesic import geodesic_solver
 from geodata.mesh import Mesh
 from geodata.surface_points import insert_points
 
 from bench_gegnn import heat_pairs, timed
 from machine import cpu_description  # benchmarks/ is on sys.path when a script there runs
+from stores import mesh_id as find_mesh
 
 
-def load(store, mesh_id):
-    g = zarr.open_group(f"{store}/meshes/{mesh_id}", mode="r")
-    return g["vertices"][:].astype(np.float64), g["faces"][:].astype(np.int64), g
+def load(store, mesh_id, pairs=False):
+    """The mesh's vertices, faces and (with ``pairs``) its stored geodesic arrays by name, read into memory."""
+    with geostore.read_mesh(store, mesh_id) as g:
+        stored = {name: g[name][:] for name in ("geodesic/pairs", "geodesic/distances")} if pairs else None
+        return g["vertices"][:].astype(np.float64), g["faces"][:].astype(np.int64), stored
 
 
 def mre(pred, exact):
@@ -108,7 +112,7 @@ def section_matrix(model, v, f, rows, exact_rows=256):
 
 
 def section_surface(model, store, rows, sources=8, targets=200):
-    ids = sorted(zarr.open_group(f"{store}/meshes", mode="r").group_keys())
+    ids = sorted(geostore.list_meshes(store))
     table = []
     for mesh_id in ids:
         v, f, _ = load(store, mesh_id)
@@ -146,11 +150,12 @@ def section_surface(model, store, rows, sources=8, targets=200):
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("store", nargs="?", default="data/val.zarr")
-    ap.add_argument("--mesh", default="dragon-4af53808")
+    ap.add_argument("--mesh", default="dragon-4af53808", help="a mesh id of the store, or a unique prefix of one")
     ap.add_argument("--only", default="queries,matrix,surface")
     args = ap.parse_args()
     model = GeGnn.pretrained().eval()
-    v, f, g = load(args.store, args.mesh)
+    args.mesh = find_mesh(args.store, args.mesh)
+    v, f, g = load(args.store, args.mesh, pairs=True)
     print(f"{args.mesh}: {len(v)} vertices; CPU: {cpu_description()}, {torch.get_num_threads()} threads, "
           f"load average {os.getloadavg()[0]:.1f}; torch {torch.__version__}")
     rows = []

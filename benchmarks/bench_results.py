@@ -36,6 +36,7 @@ from geodata.mesh import unique_edges
 
 import bench_gegnn  # benchmarks/ is on sys.path when a script there runs
 from machine import cpu_description
+from stores import mesh_id as find_mesh
 
 
 LANDMARKS = 64  # K of the bound-alone column when the model has no landmarks
@@ -152,8 +153,9 @@ def main():
     ap.add_argument("--checkpoint", help="default: the model shipped in the package")
     ap.add_argument("--out", default="docs")
     ap.add_argument("--grid", default="cow-69afce54,hand_closed-cb2fb353,dragon-4af53808,teapot-1b5396fe",
-                    help="meshes of the picture grid (comma-separated ids)")
-    ap.add_argument("--meshes", help="only these meshes (comma-separated ids; default: all)")
+                    help="meshes of the picture grid (comma-separated ids, or unique prefixes of ids)")
+    ap.add_argument("--meshes", help="only these meshes (comma-separated ids, or unique prefixes of ids; "
+                                     "default: all)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--ablation", help="markdown table of benchmarks/ablation_landmarks.py to include")
     ap.add_argument("--landmarks-table", help="markdown of benchmarks/ablation_k.py --out FILE to include")
@@ -168,7 +170,8 @@ def main():
     model.eval()
     paper = GeGnn.pretrained("paper").eval()
     store = GeodesicStore(args.store)
-    mesh_ids = args.meshes.split(",") if args.meshes else store.mesh_ids
+    mesh_ids = ([find_mesh(args.store, m, store.mesh_ids) for m in args.meshes.split(",")] if args.meshes
+                else store.mesh_ids)
     rows = []
     for k, mesh_id in enumerate(mesh_ids):
         rng = np.random.default_rng([args.seed, store.mesh_ids.index(mesh_id)])
@@ -177,7 +180,8 @@ def main():
 
     out = Path(args.out)
     (out / "img").mkdir(parents=True, exist_ok=True)
-    grid_ids = [m for m in args.grid.split(",") if m in mesh_ids]
+    grid_ids = [find_mesh(args.store, p, mesh_ids) for p in args.grid.split(",")
+                if any(m.startswith(p) for m in mesh_ids)]  # a grid mesh not evaluated is left out
     grid_rows = []
     for mesh_id in grid_ids:
         v, f, s, pred, paper_pred, exact = next(r for r in rows if r["mesh"] == mesh_id)["_picture"]

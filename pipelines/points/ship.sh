@@ -13,8 +13,10 @@ mkdir -p "$runs"
 gegnn export gegnn/weights/gegnn-landmark-v1.safetensors gegnn/weights/gegnn-points-v1.safetensors --points 8
 
 # Area-uniform surface points per validation mesh with exact distances between them (the `surface` kind):
-# 8,000 in the store itself, 32,000 in a copy made before (a store holds one points/ subgroup a mesh).
-[ -d "$data/val-32k.zarr" ] || { cp -r "$data/val.zarr" "$data/val-32k.zarr" && rm -rf "$data"/val-32k.zarr/meshes/*/points; }
+# 8,000 in the store itself, 32,000 in a copy made before (a store holds one points subgroup a mesh): the
+# copy without the 8k points (meshes/<id>.points.zip) or their failure records (failed/<id>.points).
+[ -d "$data/val-32k.zarr" ] || { cp -r "$data/val.zarr" "$data/val-32k.zarr" &&
+    rm -rf "$data"/val-32k.zarr/meshes/*.points.zip "$data"/val-32k.zarr/failed/*.points; }
 geodata points "$data/val.zarr" --points 8000 --pairs 160000
 geodata points "$data/val-32k.zarr" --points 32000 --pairs 160000
 
