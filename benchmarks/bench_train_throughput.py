@@ -100,7 +100,7 @@ def main():
         store = f"{d}/s.zarr"
         write_store(store, meshes)
         spec = FieldSpec("landmark", args.landmarks)
-        cache = FieldCache(f"{d}/fields.zarr", spec)
+        cache = FieldCache(f"{d}/fields", spec)
         plain = BatchDataset(store, "geodesic", 0, args.pairs_per_mesh, True, 5, 1 / 16, 3 / 16)
         t = time.perf_counter()
         fill_field_cache(cache.path, spec, [(plain, ids, range(LANDMARK_DRAWS))], Dist(),

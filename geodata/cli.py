@@ -402,13 +402,15 @@ def info(out, csv_file):
     Every input file any `geodata prepare` run found is accounted for: ok (its mesh), duplicate (a byte copy
     of another input's mesh), failed (stage and reason), or pending (not done yet: a run is at work, or
     was killed)."""
+    from geodata.accounting import fates, read_attrs
+
     try:
         root = store.open_store(out)
     except store.StoreError as exc:
         raise click.ClickException(str(exc)) from None
     meshes = store.list_meshes(out)
     failures = store.list_failures(out)
-    attrs = _read_attrs(out, meshes)
+    attrs = read_attrs(out, meshes)
     inputs = fates(store.read_ledgers(out), meshes, attrs, failures)
     if csv_file == "-":  # the table alone, for a pipe
         _write_csv(csv_file, inputs)
@@ -447,40 +449,6 @@ def info(out, csv_file):
             click.echo(f"  {a.get('source')}{sub}  [{a.get('stage')}]  {a.get('error')}")
     if csv_file:
         _write_csv(csv_file, inputs)
-
-
-def _read_attrs(out, meshes: dict) -> dict[str, dict]:
-    """Every published mesh's attributes (a few threads: each is one small read from its zip)."""
-    from concurrent.futures import ThreadPoolExecutor
-
-    with ThreadPoolExecutor(8) as pool:
-        found = dict(zip(meshes, pool.map(lambda m: store.mesh_attrs(out, m), meshes)))
-    return {k: a for k, a in found.items() if a is not None}
-
-
-def fates(ledgers: dict, meshes: dict, attrs: dict, failures: dict) -> list[dict]:
-    """The fate of every input file in the runs' ledgers: ok (the source its published mesh records),
-    duplicate (a byte copy of the same file name: the mesh records another source), failed (the mesh's
-    failure record), pending. A byte copy under another file name is a mesh of its own: its detail says so."""
-    published_as = defaultdict(set)  # byte copies under another file name are meshes of their own
-    for entry in ledgers.values():
-        if entry["mesh_id"] in meshes:
-            published_as[entry["sha256"]].add(entry["mesh_id"])
-    rows = []
-    for (root, source), entry in sorted(ledgers.items(), key=lambda kv: kv[0][1]):
-        mesh_id = entry["mesh_id"]
-        row = {"source": source, "sha256": entry["sha256"], "mesh_id": mesh_id, "fate": "pending", "detail": ""}
-        if mesh_id in meshes:
-            owner = attrs.get(mesh_id, {}).get("source")
-            if owner != source:
-                row.update(fate="duplicate", detail=f"duplicate of {mesh_id} ({owner})")
-            else:
-                others = sorted(published_as[entry["sha256"]] - {mesh_id})
-                row.update(fate="ok", detail=f"same bytes as {', '.join(others)}" if others else "")
-        elif mesh_id in failures:
-            row.update(fate="failed", detail=f"[{failures[mesh_id].get('stage')}] {failures[mesh_id].get('error')}")
-        rows.append(row)
-    return rows
 
 
 def _write_csv(path: str, rows: list[dict]) -> None:

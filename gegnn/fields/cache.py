@@ -35,7 +35,6 @@ float32, rewritten in place while others could read it) is refused by name: its 
 from __future__ import annotations
 
 import contextlib
-import hashlib
 import io
 import json
 import multiprocessing
@@ -46,11 +45,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from geodata.store import geometry_key  # the key is recorded at prepare time: one formula for both
 
 from .landmarks import landmark_solver
 from .spectral import spectral_codes
 
-__all__ = ["FieldSpec", "FieldCache", "geometry_key", "estimate_fill", "readable", "LANDMARK_DRAWS"]
+__all__ = ["FieldSpec", "FieldCache", "estimate_fill", "readable", "LANDMARK_DRAWS"]
 
 FORMAT = 2  # 1: a zarr group of float32 arrays, each with a "complete" attribute (before 2026-11-26)
 LANDMARK_DRAWS = 4  # landmark choices per training mesh (augmentation; each computed once, in the cache)
@@ -116,13 +116,6 @@ class FieldSpec:
             return [solver(seed).distances for seed in seeds]
         codes = spectral_codes(vertices, faces, self.size)  # no choice: the same for every seed
         return [codes for _ in seeds]
-
-
-def geometry_key(vertices: np.ndarray, faces: np.ndarray) -> str:
-    """A content hash of a mesh (24 hex digits of the SHA-256 of its float32 vertices and int64 faces)."""
-    h = hashlib.sha256(np.ascontiguousarray(vertices, dtype=np.float32).tobytes())
-    h.update(np.ascontiguousarray(faces, dtype=np.int64).tobytes())
-    return h.hexdigest()[:24]
 
 
 class FieldCache:

@@ -15,8 +15,9 @@ import torch
 from torch import Tensor
 
 from geodata import store as geostore
+from geodata.store import geometry_key
 
-from ..fields.cache import FieldCache, FieldSpec, geometry_key
+from ..fields.cache import FieldCache, FieldSpec
 from ..graph import Graph, Tensors, disjoint_union, mesh_graph, random_rotation
 from ..nn.geopool import Hierarchy, build_hierarchy
 
@@ -38,7 +39,7 @@ class MeshGeometry:
 
     @cached_property
     def key(self) -> str:
-        """The field cache's key: the content hash (:func:`gegnn.fields.cache.geometry_key`) of the stored mesh,
+        """The field cache's key: the content hash (:func:`geodata.store.geometry_key`) of the stored mesh,
         for a point cloud the one its points were made from (so that every rank can tell duplicates
         apart from the store alone)."""
         return self.derived_from or geometry_key(self.vertices, self.faces)

@@ -25,7 +25,7 @@ gegnn export "$runs/bih-s32/best.safetensors" gegnn/weights/gegnn-biharmonic-v1.
 #    after the decoder warm-up in its train.log (the epoch at lr 0 changes nothing; stop it there).
 gegnn train "$data/train.zarr" --run "$runs/bih-s32-noembed" $common --init $landmark --spectral 32 \
     --spectral-no-embedding --decoder-warmup 6000 --epochs 1 --lr 0 --warmup-epochs 0 \
-    --field-cache "$runs/bih-s32/fields.zarr"
+    --field-cache "$runs/bih-s32/fields"
 
 # 3. The pure learned model (no eigen-solve; the paper's claim): the paper model's network with the
 #    Euclidean decoder (a biharmonic distance is a Euclidean distance of an embedding), end to end.

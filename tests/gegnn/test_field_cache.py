@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 from gegnn_stores import ellipsoid, flat_grid, small_config
 
-from gegnn.fields.cache import LANDMARK_DRAWS, FieldCache, FieldSpec, geometry_key
+from gegnn.fields.cache import LANDMARK_DRAWS, FieldCache, FieldSpec
+from geodata.store import geometry_key
 from gegnn.fields.landmarks import landmark_fields
 from gegnn.fields.spectral import spectral_codes
 

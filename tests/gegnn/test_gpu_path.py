@@ -11,7 +11,8 @@ import gegnn.training.devices as gdevices
 import gegnn.training.loop as gtrain
 from gegnn import Embedding, GeGnn
 from gegnn.decoders import DistanceDecoder, LandmarkDecoder
-from gegnn.fields.cache import LANDMARK_DRAWS, FieldCache, FieldSpec, geometry_key
+from gegnn.fields.cache import LANDMARK_DRAWS, FieldCache, FieldSpec
+from geodata.store import geometry_key
 from gegnn.fields.landmarks import landmark_fields
 from gegnn.metrics import relative_error
 from gegnn.nn import aggregate, scatter_count
@@ -302,7 +303,7 @@ def test_training_fills_the_landmark_cache_and_workers_only_read_it(tiny_store, 
     cfg = gtrain.TrainConfig(store=tiny_store, run=str(tmp_path / "run"), epochs=1, batch_size=2,
                              pairs_per_mesh=200, workers=0)
     gtrain.train(cfg, small_config(landmarks=4))
-    cache = FieldCache(tmp_path / "run" / "fields.zarr", FieldSpec("landmark", 4))
+    cache = FieldCache(tmp_path / "run" / "fields", FieldSpec("landmark", 4))
     ds = BatchDataset(tiny_store, "geodesic", 0, 200, True, 5, 1 / 16, 3 / 16, cache.spec, str(cache.path))
     train_ids, val_ids = gtrain.split_meshes(ds.store.mesh_ids, cfg.val_fraction)
     # every training mesh's every draw is its own: the landmark fields of that mesh with that seed
@@ -311,7 +312,8 @@ def test_training_fills_the_landmark_cache_and_workers_only_read_it(tiny_store, 
         g = ds.store.geometry(mesh_id)
         draws = [cache.get(geometry_key(g.vertices, g.faces), seed) for seed in range(LANDMARK_DRAWS)]
         for seed, fields in enumerate(draws):
-            np.testing.assert_array_equal(fields, landmark_fields(g.vertices, g.faces, 4, seed).distances)
+            expected = landmark_fields(g.vertices, g.faces, 4, seed).distances  # stored as float16
+            np.testing.assert_array_equal(fields, expected.astype(np.float16).astype(np.float32))
         assert all(not np.array_equal(a, b) for k, a in enumerate(draws) for b in draws[k + 1:])
         drawn[mesh_id] = draws
 
