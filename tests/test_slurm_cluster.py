@@ -50,6 +50,13 @@ def _env(tmp_path):
         f'{sys.executable} -c "import os; print(len(os.sched_getaffinity(0)))" > "$SLURM_SUBMIT_DIR/cores-$SLURM_JOB_ID"\n'
         f'exec {real} "$@"\n')
     (bin_dir / "torchrun").chmod(0o755)
+    # A prepare task of the shard named in the file "hold" waits there (a shard at work when its node fails).
+    (bin_dir / "geodata").write_text(
+        "#!/usr/bin/env bash\n"
+        f'[ "$1" = prepare ] && [[ " $* " != *" --check "* && -e "{tmp_path}/hold" && " $* " == *" --shard '
+        f'$(cat "{tmp_path}/hold") "* ]] && sleep 3600\n'
+        f'exec {shutil.which("geodata", path=str(Path(sys.executable).parent))} "$@"\n')
+    (bin_dir / "geodata").chmod(0o755)
     return {**os.environ, "PATH": f"{bin_dir}:{Path(sys.executable).parent}:{os.environ['PATH']}"}
 
 
@@ -89,6 +96,9 @@ def test_the_chain_with_a_purged_shard_recovered_then_two_training_jobs(cluster,
                    capture_output=True)
     skip = tmp_path / "skip list.txt"  # an option holding a space, to its stage intact
     skip.write_text("crate.glb\n")
+    prepare_options = ["prepare", "raw", "out.zarr", "--pairs", "3000", "--exclude", str(skip)]
+    shard = next(k for k in range(2) if _check(tmp_path, prepare_options, k) == 3)  # one with inputs
+    (tmp_path / "hold").write_text(f"{shard}/2")
     submitted = subprocess.run(
         ["bash", str(SLURM / "submit.sh"), "raw", "out.zarr", "run", "2", "1",
          "--prepare", "--pairs", "3000", "--exclude", str(skip), "--biharmonic", "--pairs", "3000",
@@ -98,21 +108,22 @@ def test_the_chain_with_a_purged_shard_recovered_then_two_training_jobs(cluster,
     ids = submitted.split("\n")[0].split()
     prepare, biharmonic, train = ids[1], ids[4], ids[7]
     chain = submitted.split("recover.sh ")[1].strip()
-    t0 = time.time()  # a shard lost while it runs (cancelled, as a node failure would): the chain is stuck
-    while "RUNNING" not in subprocess.run(["squeue", "-h", "-j", f"{prepare}_1", "-o", "%T"], capture_output=True,
-                                          text=True).stdout:
-        assert time.time() - t0 < 300, "shard 1 never started"
+    t0 = time.time()  # the held shard lost while it runs (cancelled, as a node failure would): the chain is stuck
+    while "RUNNING" not in subprocess.run(["squeue", "-h", "-j", f"{prepare}_{shard}", "-o", "%T"],
+                                          capture_output=True, text=True).stdout:
+        assert time.time() - t0 < 300, "the shard never started"
         time.sleep(0.5)
-    subprocess.run(["scancel", f"{prepare}_1"], check=True)
+    subprocess.run(["scancel", f"{prepare}_{shard}"], check=True)
+    (tmp_path / "hold").unlink()
     t0 = time.time()  # until SLURM has forgotten the prepare array (MinJobAge): only the store can tell now
     while not _forgotten(prepare):
         assert time.time() - t0 < 400, "the prepare array's records were never purged"
         time.sleep(5)
-    assert _check(tmp_path, ["prepare", "raw", "out.zarr", "--pairs", "3000", "--exclude", str(skip)], 1) == 3
+    assert _check(tmp_path, prepare_options, shard) == 3  # its meshes are missing
     recovered = subprocess.run(["bash", str(SLURM / "recover.sh"), chain], env=env, capture_output=True,
                                text=True)
     assert recovered.returncode == 0, recovered.stderr
-    assert "prepare shards 1 resubmitted" in recovered.stderr, recovered.stderr
+    assert f"prepare shards {shard} resubmitted" in recovered.stderr, recovered.stderr
     assert f"{biharmonic} waits on" in recovered.stdout, recovered.stdout
     _wait_gone([prepare, biharmonic, train, *[line.split("+=(")[1].rstrip(")") for line in
                                             Path(chain).read_text().splitlines() if "_jobs+=(" in line]])
