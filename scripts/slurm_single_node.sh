@@ -19,10 +19,13 @@ ours() {  # NAME: the pid in NAME's pid file, if that process runs and is NAME
     pid=$(cat "$state/$1.pid" 2>/dev/null) || return 1
     [[ $pid =~ ^[0-9]+$ ]] && [ "$(cat "/proc/$pid/comm" 2>/dev/null)" = "$1" ] && echo "$pid"
 }
-others() {  # NAME: the pids of the processes called NAME that this script did not start
-    local mine
+others() {  # NAME: the pids of the live processes called NAME that this script did not start
+    local mine pid
     mine=$(ours "$1" || true)
-    pgrep -x "$1" | grep -vx "${mine:-none}" || true
+    for pid in $(pgrep -x "$1" || true); do
+        [ "$pid" != "$mine" ] && [ "$(awk '{print $3}' "/proc/$pid/stat" 2>/dev/null)" != Z ] && echo "$pid"
+    done
+    return 0
 }
 
 case ${1:-start} in

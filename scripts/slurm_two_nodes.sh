@@ -27,9 +27,23 @@ stop_one() {  # NAME PROCESS
     pid=$(ours "$1" "$2") || { rm -f "$state/$1.pid"; return 0; }
     kill "$pid"
     for _ in $(seq 100); do [ -e "/proc/$pid" ] || break; sleep 0.1; done
+    if ours "$1" "$2" >/dev/null; then kill -KILL "$pid"; fi  # still its own daemon after 10 s
     rm -f "$state/$1.pid"
 }
 stop() {
+    # Its jobs first: their steps (slurmstepd) outlive slurmd, and a slurmd ends only after its steps.
+    if ours slurmctld slurmctld >/dev/null; then
+        export SLURM_CONF=$state/slurm.conf
+        jobs=$(nsenter --net="/run/netns/$ctl" squeue -h -o %A 2>/dev/null | paste -sd' ' || true)
+        if [ -n "$jobs" ]; then
+            # shellcheck disable=SC2086  # job ids, one word each
+            nsenter --net="/run/netns/$ctl" scancel $jobs || true
+            for _ in $(seq 60); do
+                [ -z "$(nsenter --net="/run/netns/$ctl" squeue -h 2>/dev/null)" ] && break
+                sleep 1
+            done
+        fi
+    fi
     stop_one geo-n2 slurmd; stop_one geo-n1 slurmd; stop_one slurmctld slurmctld; stop_one munged munged
     for ns in "$ctl" ${nodes[@]+"${nodes[@]}"}; do
         if [ -e "$state/netns-$ns" ]; then ip netns del "$ns" 2>/dev/null || true; rm -f "$state/netns-$ns"; fi
