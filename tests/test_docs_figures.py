@@ -1,0 +1,143 @@
+"""The key figures of README.md and the docs agree with docs/results.json, one value per fact (issue 51).
+
+docs/results.json holds each figure once, with the command, date and CPU that measured it. Each CLAIM below
+finds where a page states a figure (the regex's group is the figure, its surroundings say which model and
+what quantity); the test fails when a page states it differently, or when a claim no longer finds its
+sentence (a rewritten page must be tied to the file again, not silently drop out of the check).
+"""
+import json
+import re
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+RESULTS = ROOT / "docs" / "results.json"
+
+# (figure key, page, pattern with one group: the figure as the page states it)
+CLAIMS = [
+    # accuracy of each shipped model
+    ("mre.landmark-v2", "README.md", r"`GeGnn\.pretrained\(\)`: landmark-v2, K = 256 landmarks \(the default\) \| \*\*([\d.]+%)\*\*"),
+    ("mre.landmark-v2", "docs/index.md", r"`GeGnn\.pretrained\(\)`: landmark-v2, K = 256 landmarks \(the default\) \| \*\*([\d.]+%)\*\*"),
+    ("mre.landmark-v2", "docs/queries.md", r"`GeGnn\.pretrained\(\)`: landmark-v2, K = 256 landmarks \(the default\) \| \*\*([\d.]+%)\*\*"),
+    ("mre.landmark-v2", "docs/model-card.md", r"`gegnn/weights/gegnn-landmark-v2\.safetensors` \| landmark-guided GeGnn, K = 256 \| \*\*([\d.]+%)\*\*"),
+    # the geodesic table's mean row: eight bold columns to the end of the line (the biharmonic one goes on)
+    ("mre.landmark-v2", "docs/results.md", r"(?m)^\| \*\*mean\*\* \| \| \*\*([\d.]+%)\*\* \|(?: \*\*[\d.]+%\*\* \|){7}$"),
+    ("mre.landmark-v1", "README.md", r"`GeGnn\.pretrained\(\"landmark-v1\"\)`: the previous default, K = 128 \| ([\d.]+%)"),
+    ("mre.landmark-v1", "docs/index.md", r"`GeGnn\.pretrained\(\"landmark-v1\"\)`: the previous default, K = 128 \| ([\d.]+%)"),
+    ("mre.landmark-v1", "docs/queries.md", r"`GeGnn\.pretrained\(\"landmark-v1\"\)`: the previous default, K = 128 \| ([\d.]+%)"),
+    ("mre.landmark-v1", "docs/model-card.md", r"`gegnn/weights/gegnn-landmark-v1\.safetensors` \| the previous default, K = 128 \| ([\d.]+%)"),
+    ("mre.paper", "README.md", r"`GeGnn\.pretrained\(\"paper\"\)`: the paper's model \| ([\d.]+%)"),
+    ("mre.paper", "docs/index.md", r"`GeGnn\.pretrained\(\"paper\"\)`: the paper's model \| ([\d.]+%)"),
+    ("mre.paper", "docs/queries.md", r"`GeGnn\.pretrained\(\"paper\"\)`: the paper's model \| ([\d.]+%)"),
+    ("mre.paper", "docs/model-card.md", r"`gegnn/weights/gegnn-classic-v1\.safetensors` \| the paper's model \| ([\d.]+%)"),
+    ("mre.paper", "docs/results.md", r"(?m)^\| \*\*mean\*\* \| \| \*\*[\d.]+%\*\* \| \*\*([\d.]+%)\*\* \|(?: \*\*[\d.]+%\*\* \|){6}$"),
+    ("mre.heat", "docs/results.md", r"(?m)^\| \*\*mean\*\* \| \|(?: \*\*[\d.]+%\*\* \|){3} \*\*([\d.]+%)\*\* \|(?: \*\*[\d.]+%\*\* \|){4}$"),
+    ("mre.biharmonic", "docs/results.md", r"(?m)^\| \*\*mean\*\* \| \| \*\*([\d.]+%)\*\* \|(?: \*\*[\d.]+%\*\* \|){7} [\d.]+ \|$"),
+    ("mre.heat", "README.md", r"heat method \(potpourri3d\), same pairs \| ([\d.]+%)"),
+    ("mre.heat", "docs/index.md", r"heat method \(potpourri3d\), same pairs \| ([\d.]+%)"),
+    ("mre.heat", "docs/queries.md", r"heat method \(potpourri3d\), same pairs \| ([\d.]+%)"),
+    ("mre.biharmonic", "README.md", r"predicts \*\*biharmonic\*\* distances to \*\*([\d.]+%)\*\*"),
+    ("mre.biharmonic", "docs/queries.md", r"predicts \*\*biharmonic\*\* distances: \*\*([\d.]+%)\*\*"),
+    ("mre.biharmonic", "docs/model-card.md", r"learned correction \| \*\*([\d.]+%)\*\* \(biharmonic\)"),
+    ("mre.points-v2", "README.md", r"takes point clouds without faces: \*\*([\d.]+%)\*\*"),
+    ("mre.points-v2", "docs/queries.md", r"neighbour graph of the points, \*\*([\d.]+%)\*\*"),
+    ("mre.points-v2", "docs/queries.md", r"clouds of the validation meshes' vertices, all stored pairs: \*\*([\d.]+%)\*\*"),
+    ("mre.points-v2", "docs/model-card.md", r"`gegnn/weights/gegnn-points-v2\.safetensors` \| point clouds[^|]*\| ([\d.]+%)"),
+    ("mre.points-v2", "docs/model-card.md", r"points-v2\.safetensors data/val\.zarr`, 2026-11-26\): \*\*([\d.]+%)\*\*"),
+    ("mre.points-v2", "docs/pointclouds.md", r"points-v2\.safetensors data/val\.zarr`, 2026-11-26\): \*\*([\d.]+%)\*\*"),
+    ("mre.points-v1", "README.md", r"\(points-v1, K = 128: ([\d.]+%)\)"),
+    ("mre.points-v1", "docs/queries.md", r"\(`\"points-v1\"`: ([\d.]+%)\)"),
+    ("mre.points-v1", "docs/model-card.md", r"`gegnn/weights/gegnn-points-v1\.safetensors` \| the previous one[^|]*\| ([\d.]+%)"),
+    ("mre.points-v1", "docs/pointclouds.md", r"\*\*[\d.]+%\*\*\n\(points-v1: ([\d.]+%)\)"),
+    # speed-up over the heat method, and the paper model's time
+    ("speedup.landmark-v2", "README.md", r"\*\*([\d.]+-[\d.]+x)\*\* the heat method"),
+    ("speedup.landmark-v2", "docs/queries.md", r"\*\*([\d.]+-[\d.]+x)\*\* the heat method"),
+    ("speedup.landmark-v2", "docs/results.md", r"The speed-up stated elsewhere, \*\*([\d.]+-[\d.]+x)\*\*"),
+    ("time.paper", "README.md", r"`GeGnn\.pretrained\(\"paper\"\)`: the paper's model \| [\d.]+% \| ([\d.]+ s)"),
+    ("time.paper", "docs/index.md", r"`GeGnn\.pretrained\(\"paper\"\)`: the paper's model \| [\d.]+% \| ([\d.]+ s)"),
+    ("time.paper", "docs/queries.md", r"`GeGnn\.pretrained\(\"paper\"\)`: the paper's model \| [\d.]+% \| ([\d.]+ s)"),
+    ("time.paper", "docs/model-card.md", r"1M random queries 0\.22 s, \*\*([\d.]+ s)\*\* in all"),
+    # the viewer's page
+    ("page.landmark-v2.5k", "docs/queries.md", r"K = 256\): \*\*([\d.]+ MiB)\*\* at 4,762 vertices"),
+    ("page.landmark-v2.50k", "docs/queries.md", r"at 4,762 vertices, ([\d.]+ MiB) at\s+50k"),
+    ("page.landmark-v2.5k", "gegnn/cli/pictures.py", r"K = 256: ([\d.]+ MiB)\s+at 4,762 vertices"),
+]
+
+# What a page must no longer say: a shipped model described with another model's numbers.
+STALE = [
+    ("docs/queries.md", r"ships (?:three|four|five) GeGnn models"),
+    ("docs/index.md", r"the (?:three|four|five) shipped models"),
+    ("README.md", r"pretrained\(\"points\"\)[^\n]*3\.6[12]%"),
+    ("docs/queries.md", r"5\.5 MB at 5k vertices"),
+    ("docs/model-card.md", r"## `gegnn-points-v1`: point clouds \(`\"points\"`\)"),
+    ("gegnn/cli/pictures.py", r"5 MB at 5k vertices"),
+]
+
+WORDS = {4: "four", 5: "five", 6: "six", 7: "seven", 8: "eight"}
+
+
+def figures():
+    return json.loads(RESULTS.read_text())["figures"]
+
+
+def mismatches(claims, figures_, read):
+    """Every claim whose page does not state its figure as the results file does: (key, page, what)."""
+    bad = []
+    for key, page, pattern in claims:
+        found = re.findall(pattern, read(page))
+        if not found:
+            bad.append((key, page, "the sentence is gone: tie the page to docs/results.json again"))
+        bad += [(key, page, f"states {value}, docs/results.json {figures_[key]['value']}")
+                for value in found if value != figures_[key]["value"]]
+    return bad
+
+
+def read_page(page):
+    return (ROOT / page).read_text(encoding="utf-8")
+
+
+def test_results_file_names_command_date_and_cpu():
+    figs = figures()
+    assert {key for key, _, _ in CLAIMS} <= set(figs)
+    for key, fig in figs.items():
+        for field in ("value", "what", "command", "date", "cpu", "source"):
+            assert fig.get(field), f"{key}: no {field}"
+        assert re.fullmatch(r"\d{4}-\d{2}-\d{2}", fig["date"]), key
+        page = fig["source"].split("#")[0]
+        assert (ROOT / page).is_file(), f"{key}: {page} does not exist"
+
+
+@pytest.mark.parametrize("key,page,pattern", CLAIMS, ids=[f"{k}@{p}" for k, p, _ in CLAIMS])
+def test_page_states_the_figure_of_the_results_file(key, page, pattern):
+    assert mismatches([(key, page, pattern)], figures(), read_page) == []
+
+
+def test_a_differing_figure_is_caught():
+    """The check fails on a page that states a figure otherwise, or no longer states it."""
+    figs = figures()
+    claim = CLAIMS[0]
+    text = read_page(claim[1])
+    changed = text.replace(f"**{figs[claim[0]]['value']}**", "**1.15%**")
+    assert changed != text
+    assert mismatches([claim], figs, lambda page: changed)[0][2].startswith("states 1.15%")
+    assert "gone" in mismatches([claim], figs, lambda page: "")[0][2]
+
+
+@pytest.mark.parametrize("page,pattern", STALE, ids=[f"{p}:{s[:24]}" for p, s in STALE])
+def test_no_page_keeps_a_stale_figure(page, pattern):
+    assert not re.search(pattern, read_page(page)), f"{page} still says {pattern!r}"
+
+
+def test_pages_count_the_shipped_models():
+    from gegnn.model import PRETRAINED
+
+    weights = sorted(p.name for p in (ROOT / "gegnn" / "weights").glob("*.safetensors"))
+    assert sorted(PRETRAINED.values()) == weights
+    word = WORDS[len(PRETRAINED)]
+    assert f"ships {word} GeGnn models" in read_page("README.md")
+    assert f"ships {word} GeGnn models" in read_page("docs/queries.md")
+    assert f"the {word} shipped models" in read_page("docs/index.md")
+    card = read_page("docs/model-card.md")
+    for name in PRETRAINED:
+        assert f'`"{name}"`' in card, f"the model card has no row for {name!r}"
