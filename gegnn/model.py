@@ -21,6 +21,7 @@ from .graph import Graph, mesh_graph
 from .nn import GeoConv, GeoPool, GeoUnpool, Hierarchy, ResBlocks, build_hierarchy
 from .precision import resolve
 from .queries.embedding import Embedding
+from .queries.proxy import decimate, proxy_places, proxy_size
 from .threads import beside, fewer_for_torch
 
 __all__ = ["GeGnnConfig", "GeGnn", "DistanceDecoder", "LandmarkDecoder", "SpectralDecoder"]
@@ -118,7 +119,7 @@ class GeGnn(nn.Module):
 
     # -- inference on raw meshes -----------------------------------------------------------------------
     def embed(self, vertices: np.ndarray, faces: np.ndarray | None = None, device=None, precision: str = "fp32",
-              normals: np.ndarray | None = None):
+              normals: np.ndarray | None = None, proxy="auto"):
         """Embed one mesh, or for a point-cloud model (``config.points``) one point cloud, given as NumPy
         arrays in any units (one forward pass).
 
@@ -130,7 +131,12 @@ class GeGnn(nn.Module):
         ``precision`` governs the network and the returned embedding's decoder alike: ``"fp32"`` (the
         default), ``"bf16"`` (the network under bf16 autocast, the decoder's hidden layers in bf16: 1.6x
         faster on a CPU with AVX512-BF16, embeddings within ~1% (relative norm) of fp32), or ``"auto"``:
-        bf16 only where the hardware has native bf16 (:mod:`gegnn.precision`). With more than one torch thread
+        bf16 only where the hardware has native bf16 (:mod:`gegnn.precision`). A mesh of more than
+        ``PROXY_ABOVE`` (40,000) vertices is embedded through a proxy of the same surface with ``PROXY_VERTICES``
+        (20,000) (``proxy``: ``"auto"``, another vertex count, or None for the mesh itself;
+        :mod:`gegnn.queries.proxy`): the network and fields run at the resolution the model knows, every vertex
+        of the mesh gets the code of its closest point on the proxy, and all queries answer on the mesh's own
+        vertices. With more than one torch thread
         (``torch.set_num_threads``) the U-Net runs on a thread of its own while the fields are computed,
         and a cloud's row-wise steps are spread over the threads (:mod:`gegnn.threads`); the result is the
         same to the bit.
@@ -143,7 +149,14 @@ class GeGnn(nn.Module):
         if device is not None:  # outside inference mode: moved parameters stay trainable
             self.to(device)
         with torch.inference_mode():
-            return self._embed(vertices, faces, precision, normals)
+            target = None if faces is None or self.config.points else proxy_size(len(vertices), proxy)
+            if target is None:
+                return self._embed(vertices, faces, precision, normals)
+            vertices, faces = _validated(vertices, faces)
+            coarse = decimate(vertices, faces, target)
+            places = proxy_places(vertices, coarse)
+            return self._embed(coarse.vertices, coarse.faces, precision, None).at_points(
+                places.face, places.bary, vertices=vertices, faces=faces)
 
     def _embed(self, vertices, faces, precision, normals):
         device = next(self.parameters()).device

@@ -120,6 +120,20 @@ class Embedding:
                 out = torch.cat(parts) if parts else torch.empty(0, device=device)
         return out.reshape(shape).cpu().numpy()
 
+    def at_points(self, face, bary, vertices: np.ndarray | None = None, faces: np.ndarray | None = None,
+                  chunk: int = 1 << 16) -> "Embedding":
+        """An embedding of surface points (each a face and barycentric coordinates, (P,) and (P, 3), as
+        :meth:`surface_distance` takes them) whose codes are their blends: its :meth:`distance` between
+        points ``a`` and ``b`` is :meth:`surface_distance` between them, and every other query (fields,
+        matrices) runs on the points as on vertices. ``vertices``/``faces``: the mesh these points are the
+        vertices of, if any (another mesh of the same surface: a full-resolution mesh embedded through a
+        coarse proxy, a decimated display surface), for the geometric queries."""
+        corners, weights, _, _ = self._points(np.asarray(face).reshape(-1), np.asarray(bary).reshape(-1, 3))
+        with torch.inference_mode():
+            codes = torch.cat([self._blend(corners[s:s + chunk], weights[s:s + chunk])
+                               for s in range(0, len(corners), chunk)]) if len(corners) else self.features[:0]
+        return Embedding(codes, self.decoder, self.scale, self.precision, vertices=vertices, faces=faces)
+
     def locate(self, points):
         """The closest surface point of each xyz point (P, 3) (in the mesh's units), as
         :class:`geodata.surface_points.SurfacePoints` ``(face, bary, offset)``: the input of

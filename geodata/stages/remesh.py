@@ -19,7 +19,7 @@ import numpy as np
 from geodata.mesh import Mesh, MeshError, closed_manifold_problem, face_areas
 from geodata.stages.repair import compact, meshlab_filter, remove_degenerate_faces
 
-__all__ = ["remesh", "simplify"]
+__all__ = ["remesh", "simplify", "isotropic_remesh"]
 
 # An isotropic remesh with target length L of a surface of area A has about
 # 2A / (sqrt(3) (L / _LENGTH_FACTOR)^2) vertices (vcg splits edges longer than 4/3 L and collapses
@@ -41,6 +41,16 @@ def _isotropic(mesh: Mesh, length: float, iterations: int, checksurfdist: bool) 
     return remove_degenerate_faces(meshlab_filter(
         mesh, "meshing_isotropic_explicit_remeshing", iterations=iterations, targetlen=pymeshlab.PureValue(length),
         featuredeg=_FEATURE_DEG, checksurfdist=checksurfdist))
+
+
+def isotropic_remesh(mesh: Mesh, target_vertices: int, iterations: int = 5) -> Mesh:
+    """One isotropic remesh towards ``target_vertices`` vertices (the edge length from the surface area, as in
+    :func:`remesh`), of any surface (boundaries allowed, no closed-manifold check, no retries): for a coarse
+    stand-in of a surface, where :func:`remesh` makes training data."""
+    area = float(face_areas(mesh.vertices, mesh.faces).sum())
+    if not area > 0:
+        raise MeshError("remesh", "zero surface area")
+    return _isotropic(mesh, _LENGTH_FACTOR * np.sqrt(2.0 * area / (np.sqrt(3.0) * target_vertices)), iterations, False)
 
 
 def _presimplify(mesh: Mesh, tolerance: float) -> Mesh:

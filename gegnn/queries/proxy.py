@@ -1,0 +1,56 @@
+"""A large mesh embedded through a proxy: the same surface with fewer vertices (QEM edge collapse), embedded
+once; every vertex of the large mesh then gets the code of its closest point on the proxy (a blend of the
+proxy's vertex codes, :meth:`gegnn.queries.embedding.Embedding.at_points`). The network and the landmark
+fields run at the resolution the model was trained at, whatever the user's resolution; what scales with the
+user's mesh is the decimation and one closest-point query per vertex (libigl's AABB tree), both near-linear.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from geodata.mesh import Mesh
+from geodata.surface_points import SurfacePoints, locate_points
+
+__all__ = ["PROXY_ABOVE", "PROXY_VERTICES", "proxy_size", "decimate", "proxy_places"]
+
+PROXY_ABOVE = 40_000  # meshes with more vertices are embedded through a proxy (docs/benchmarks.md)
+PROXY_VERTICES = 20_000  # the proxy's vertex count
+COARSE = 3  # the edge collapse stops at COARSE x the proxy's vertices, the remesh does the rest
+
+
+def proxy_size(n_vertices: int, proxy) -> int | None:
+    """The proxy's vertex count for a mesh of ``n_vertices`` (None: embed the mesh itself). ``proxy``:
+    ``"auto"`` (PROXY_VERTICES above PROXY_ABOVE vertices), a vertex count (used when the mesh is larger), or
+    None / 0 (never)."""
+    if proxy == "auto":
+        return PROXY_VERTICES if n_vertices > PROXY_ABOVE else None
+    if not proxy:
+        return None
+    if not isinstance(proxy, (int, np.integer)) or isinstance(proxy, bool) or proxy < 100:
+        raise ValueError(f"proxy must be 'auto', None or a vertex count >= 100, got {proxy!r}")
+    return int(proxy) if n_vertices > proxy else None
+
+
+def decimate(vertices: np.ndarray, faces: np.ndarray, target_vertices: int) -> Mesh:
+    """The surface with about ``target_vertices`` vertices, triangulated as the model's training meshes are:
+    fast-simplification's quadric edge collapse to ``COARSE`` x the target (fast, close to the surface; its
+    long thin triangles alone cost accuracy: 3.7% against 0.64% at 320k vertices, docs/benchmarks.md), then an
+    isotropic remesh to the target (:func:`geodata.stages.remesh.isotropic_remesh`)."""
+    import fast_simplification
+
+    from geodata.stages.remesh import isotropic_remesh
+
+    vertices, faces = np.asarray(vertices, dtype=np.float64), np.asarray(faces)
+    mesh = Mesh(vertices, faces.astype(np.int64))
+    if len(vertices) > COARSE * target_vertices:
+        ratio = len(faces) / len(vertices)  # ~2 for a closed mesh; meshes with boundaries land near the target too
+        v, f = fast_simplification.simplify(vertices, faces.astype(np.int32),
+                                            target_count=max(4, int(round(COARSE * target_vertices * ratio))))
+        used, compact = np.unique(np.asarray(f, dtype=np.int64), return_inverse=True)
+        mesh = Mesh(np.asarray(v, dtype=np.float64)[used], compact.reshape(-1, 3))
+    return isotropic_remesh(mesh, target_vertices)
+
+
+def proxy_places(vertices: np.ndarray, proxy: Mesh) -> SurfacePoints:
+    """Each vertex's closest point on the proxy, as a face and barycentric coordinates (and its offset)."""
+    return locate_points(proxy, np.asarray(vertices, dtype=np.float64))

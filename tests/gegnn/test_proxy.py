@@ -1,0 +1,78 @@
+"""Large meshes embedded through a proxy (gegnn.queries.proxy): the answers are on the user's own vertices and
+as accurate as at the resolution the model was trained at; surface points as an embedding of their own."""
+import numpy as np
+import pytest
+import torch
+import trimesh
+
+from gegnn import GeGnn
+from gegnn.queries.proxy import PROXY_ABOVE, PROXY_VERTICES, decimate, proxy_size
+
+
+@pytest.fixture(scope="module")
+def model():
+    torch.manual_seed(0)
+    return GeGnn.pretrained()
+
+
+def great_circle(v, source):
+    u = v / np.linalg.norm(v, axis=1, keepdims=True)
+    return np.arccos(np.clip(u @ u[source], -1, 1))
+
+
+def test_a_dense_sphere_through_a_proxy_answers_on_its_own_vertices(model):
+    """40,962 vertices (above the threshold) through the default proxy: one code per vertex of the user's mesh,
+    distances from any vertex within 1% (MRE) of the great circles, as on the 5k sphere of the model card."""
+    sphere = trimesh.creation.icosphere(6)
+    v, f = np.asarray(sphere.vertices) * 2.0, np.asarray(sphere.faces)  # radius 2: answers in the input's units
+    assert len(v) > PROXY_ABOVE
+    emb = model.embed(v, f)
+    assert emb.num_vertices == len(v) and emb.vertices.shape == v.shape and np.array_equal(emb.faces, f)
+    for source in (0, 12345, len(v) - 1):
+        truth = 2.0 * great_circle(v, source)
+        d = emb.field(source)
+        keep = np.arange(len(v)) != source
+        assert d[source] == 0 and np.mean(np.abs(d - truth)[keep] / (truth[keep] + 2e-3)) < 0.01
+    np.testing.assert_allclose(emb.matrix(rows=[0], cols=np.arange(len(v)))[0], emb.field(0), rtol=1e-6, atol=1e-6)
+
+
+def test_a_proxy_is_a_remeshed_stand_in_of_the_same_surface():
+    sphere = trimesh.creation.icosphere(6)
+    v, f = np.asarray(sphere.vertices), np.asarray(sphere.faces)
+    coarse = decimate(v, f, 4000)
+    assert abs(coarse.n_vertices - 4000) < 0.25 * 4000
+    assert np.abs(np.linalg.norm(coarse.vertices, axis=1) - 1).max() < 0.01  # on the sphere
+    edges = np.linalg.norm(coarse.vertices[coarse.faces] - np.roll(coarse.vertices[coarse.faces], 1, axis=1), axis=2)
+    assert edges.max() / edges.min() < 4  # isotropic: no long thin triangles of a bare edge collapse
+
+
+def test_the_proxy_setting():
+    assert proxy_size(PROXY_ABOVE, "auto") is None and proxy_size(PROXY_ABOVE + 1, "auto") == PROXY_VERTICES
+    assert proxy_size(10**6, None) is None and proxy_size(10**6, 0) is None
+    assert proxy_size(6000, 5000) == 5000 and proxy_size(5000, 5000) is None
+    for bad in (50, 2.5, "big", True):
+        with pytest.raises(ValueError, match="proxy must be"):
+            proxy_size(10**6, bad)
+
+
+def test_small_meshes_are_embedded_as_they_are(model):
+    sphere = trimesh.creation.icosphere(4)
+    v, f = np.asarray(sphere.vertices), np.asarray(sphere.faces)
+    auto, itself = model.embed(v, f), model.embed(v, f, proxy=None)
+    assert torch.equal(auto.features, itself.features)
+
+
+def test_surface_points_as_an_embedding_answer_as_surface_distance(model):
+    sphere = trimesh.creation.icosphere(3)
+    v, f = np.asarray(sphere.vertices), np.asarray(sphere.faces)
+    emb = model.embed(v, f)
+    rng = np.random.default_rng(0)
+    face = rng.integers(0, len(f), 50)
+    bary = rng.dirichlet(np.ones(3), 50)
+    points = emb.at_points(face, bary)
+    a, b = rng.integers(0, 50, 200), rng.integers(0, 50, 200)
+    expected = emb.surface_distance(face[a], bary[a], face[b], bary[b])
+    got = points.distance(a, b)
+    np.testing.assert_allclose(got[a != b], expected[a != b], rtol=1e-5, atol=1e-6)
+    corner = emb.at_points(np.array([0]), np.array([[1.0, 0.0, 0.0]]))  # a point at a vertex is that vertex
+    np.testing.assert_allclose(corner.features[0], emb.features[f[0, 0]], rtol=1e-6, atol=1e-6)
