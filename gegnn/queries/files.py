@@ -88,10 +88,13 @@ RESOLUTION = {
 
 def resolution_note(n_vertices: int, config) -> str | None:
     """A word for a mesh outside the vertex counts where the model's accuracy is known to hold (by the
-    fields the model reads: landmark, spectral, or none for the paper model), saying what was measured."""
+    fields the model reads: landmark, spectral, or none for the paper model), saying what was measured. A mesh
+    embedded through a proxy (:mod:`gegnn.queries.proxy`) is judged by the proxy's size."""
+    from .proxy import PROXY_ABOVE, PROXY_VERTICES
+
     spec = FieldSpec.of(config)
     low, high, measured = RESOLUTION[spec.kind if spec else "paper"]
-    if low <= n_vertices <= high:
+    if low <= (PROXY_VERTICES if n_vertices > PROXY_ABOVE else n_vertices) <= high:  # what the network meets
         return None
     return (f"{n_vertices:,} vertices: {measured}; --prepare remeshes to ~5k first (results are carried back to "
             "this file's vertices)")

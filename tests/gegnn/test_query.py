@@ -148,12 +148,15 @@ def test_coarse_mesh_gets_a_resolution_note(ckpt, tmp_path):
 
 
 def test_resolution_note_follows_the_measurements():
-    """The landmark model was measured at 1k-100k vertices without loss (docs/applications.md): no note at 80k;
-    the paper model drifts, so it gets one there."""
+    """The landmark model was measured at 1k-100k vertices without loss (docs/applications.md): no note at 80k
+    nor at 1M (through its 20k proxy); the paper model drifts beyond 20k, so it gets one at 30k, but not at 80k,
+    which it meets as its 20k proxy."""
     from gegnn.queries.files import resolution_note
 
     assert resolution_note(80_000, GeGnn.pretrained().config) is None
-    assert "11.3% at 80k" in resolution_note(80_000, GeGnn.pretrained("paper").config)
+    assert resolution_note(1_000_000, GeGnn.pretrained().config) is None
+    assert "11.3% at 80k" in resolution_note(30_000, GeGnn.pretrained("paper").config)
+    assert resolution_note(80_000, GeGnn.pretrained("paper").config) is None
     assert "measured from 1,000 to 100,000 vertices" in resolution_note(500, GeGnn.pretrained().config)
 
 
