@@ -61,11 +61,30 @@ from geodata.mesh import edge_face_counts
 from .. import threads
 
 __all__ = ["HeatSolver", "HeatDistance", "cover_problem", "tufted_cover", "mollify", "flip_to_delaunay", "operators",
-           "MOLLIFY", "DELAUNAY_EPS", "POISSON_SHIFT"]
+           "MOLLIFY", "DELAUNAY_EPS", "POISSON_SHIFT", "time_step", "poisson_shift", "SAME_UP_TO", "RESOLUTION"]
 
 MOLLIFY = 1e-5          # mollification margin, relative to the mean cover edge length
 DELAUNAY_EPS = 1e-6     # flip an edge whose cotangent weight is below -DELAUNAY_EPS
 POISSON_SHIFT = 1e-6    # (L + POISSON_SHIFT I) phi = div X, with L the cover's Laplacian
+SAME_UP_TO = 10_000     # meshes of at most this many vertices keep t = t_coef hbar^2 and POISSON_SHIFT
+RESOLUTION = 90         # beyond: t = t_coef hbar^2 max(1, (D / hbar) / RESOLUTION), D the bounding-box diagonal
+
+
+def time_step(hbar: float, diagonal: float, n: int, t_coef: float = 0.5) -> float:
+    """The heat step t for a mesh of ``n`` vertices, mean cover edge length ``hbar`` and bounding-box
+    diagonal ``diagonal``: ``t_coef hbar^2`` up to SAME_UP_TO vertices (the fields the shipped models were
+    trained with, at ~5k), beyond ``t_coef hbar^2 max(1, (diagonal / hbar) / RESOLUTION)``, i.e. t grows
+    as hbar D instead of hbar^2 once the mesh is fine: a step tied to hbar^2 alone loses the far field
+    (bunny at 320k vertices: 11.5% off at t_coef 0.5). docs/benchmarks.md, "The heat method's time step"."""
+    t = t_coef * (hbar * hbar)
+    return t if n <= SAME_UP_TO else t * max(1.0, diagonal / hbar / RESOLUTION)
+
+
+def poisson_shift(n: int) -> float:
+    """The Poisson system's shift for ``n`` vertices: POISSON_SHIFT up to SAME_UP_TO vertices, then
+    POISSON_SHIFT SAME_UP_TO / n, so that it stays as small against the Laplacian's lowest modes (whose
+    eigenvalues fall as 1 / n) as at SAME_UP_TO: unscaled it damps them, 3% of distance error at 385k."""
+    return POISSON_SHIFT * min(1.0, SAME_UP_TO / n)
 
 
 def cover_problem(vertices, faces) -> str | None:
@@ -337,8 +356,10 @@ class HeatSolver:
     :meth:`distance` for one.
 
     Attributes:
-        n: vertex count; t: the time step.
+        n: vertex count; t: the time step; shift: the Poisson system's shift.
     """
+
+    shift = POISSON_SHIFT
 
     def _factor(self, what: str, lap: sp.csc_matrix, mass: np.ndarray, grad, div) -> None:
         """Factor (M + tL) and (L + shift I) of ``lap``, ``mass`` and ``self.t`` with ``grad`` and ``div``;
@@ -353,7 +374,7 @@ class HeatSolver:
         heat, poisson = lap.copy(), lap                       # (M + tL), (L + shift I): same pattern
         heat.data *= self.t
         heat.data[diagonal] += mass
-        poisson.data[diagonal] += POISSON_SHIFT
+        poisson.data[diagonal] += self.shift
         try:
             arrays = [np.ascontiguousarray(a, dtype=dt) for m in (heat, poisson, grad.tocsr(), div.tocsr())
                       for a, dt in ((m.indptr, np.int64), (m.indices, np.int64), (m.data, np.float64))]
@@ -383,10 +404,12 @@ class HeatDistance(HeatSolver):
     Args:
         vertices: (N, 3) float.
         faces: (F, 3) int; see :func:`cover_problem` for what is supported (ValueError otherwise).
-        t_coef: time step over the mean squared cover edge length.
+        t_coef: time step over the mean squared cover edge length, on meshes of up to SAME_UP_TO vertices;
+            on larger meshes :func:`time_step` scales it up with the resolution.
 
     Attributes:
-        n: vertex count; t: the time step; n_flips: intrinsic flips made on the cover (both copies).
+        n: vertex count; t: the time step; shift: the Poisson shift (:func:`poisson_shift`); hbar: the mean
+        cover edge length after mollification and flips; n_flips: intrinsic flips made on the cover.
     """
 
     def __init__(self, vertices, faces, t_coef: float = 0.5):
@@ -399,5 +422,7 @@ class HeatDistance(HeatSolver):
         cover = tufted_cover(v, f)
         mollify(cover, cover.length.sum() / len(cover.length))
         self.n_flips = flip_to_delaunay(cover)
-        self.t = t_coef * (cover.length.sum() / len(cover.length)) ** 2
+        self.hbar = cover.length.sum() / len(cover.length)
+        self.t = time_step(self.hbar, float(np.linalg.norm(np.ptp(v, axis=0))), self.n, t_coef)
+        self.shift = poisson_shift(self.n)
         self._factor("heat method", *operators(cover, self.n))

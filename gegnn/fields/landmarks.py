@@ -36,7 +36,7 @@ import numpy as np
 
 from geodata.mesh import Mesh, label_groups, vertex_components
 
-from .heat import HeatDistance
+from .heat import SAME_UP_TO, HeatDistance
 
 __all__ = ["LandmarkFields", "landmark_fields", "landmark_solver", "farthest_point_fields", "graph_farthest_points",
            "landmark_columns", "T_COEF"]
@@ -129,8 +129,9 @@ def landmark_solver(vertices, faces, k: int, t_coef: float = T_COEF) -> Callable
 def _heat_field(vertices, faces, t_coef: float, fields: int):
     """``field(source) -> (N,)``: potpourri3d's robust heat method, by :class:`gegnn.fields.heat.HeatDistance`
     where that pays (see the module), by potpourri3d itself elsewhere and on meshes that HeatDistance does
-    not cover (:func:`gegnn.fields.heat.cover_problem`)."""
-    if len(vertices) >= HEAT_MIN_VERTICES and fields >= HEAT_MIN_FIELDS:
+    not cover (:func:`gegnn.fields.heat.cover_problem`). Beyond SAME_UP_TO vertices always HeatDistance,
+    whose time step then grows with the resolution (:func:`gegnn.fields.heat.time_step`)."""
+    if len(vertices) > SAME_UP_TO or (len(vertices) >= HEAT_MIN_VERTICES and fields >= HEAT_MIN_FIELDS):
         try:
             return HeatDistance(vertices, faces, t_coef).distance
         except ValueError:
