@@ -46,6 +46,29 @@ def test_a_proxy_is_a_remeshed_stand_in_of_the_same_surface():
     assert edges.max() / edges.min() < 4  # isotropic: no long thin triangles of a bare edge collapse
 
 
+def test_a_mesh_of_slivers_gets_a_proxy_of_the_size_asked(monkeypatch):
+    """Each triangle of a sphere split at a random interior point, twice: most faces are slivers, which
+    fast-simplification barely collapses; the proxy still has about the vertices asked, on the sphere, and
+    well-shaped."""
+    import gegnn.queries.proxy as proxy
+    from geodata.mesh import Mesh
+
+    sphere = trimesh.creation.icosphere(4)
+    v, f = np.asarray(sphere.vertices), np.asarray(sphere.faces)
+    rng = np.random.default_rng(0)
+    for _ in range(2):
+        w = rng.dirichlet(np.ones(3), len(f))
+        c = len(v) + np.arange(len(f))
+        v = np.vstack([v, np.einsum("fk,fkd->fd", w, v[f])])
+        f = np.concatenate([np.stack([f[:, 0], f[:, 1], c], 1), np.stack([f[:, 1], f[:, 2], c], 1),
+                            np.stack([f[:, 2], f[:, 0], c], 1)])
+    assert np.mean(proxy.triangle_quality(Mesh(v, f)) < 0.1) > proxy.SLIVERS
+    coarse = decimate(v, f, 600)
+    assert abs(coarse.n_vertices - 600) < 0.25 * 600
+    assert np.abs(np.linalg.norm(coarse.vertices, axis=1) - 1).max() < 0.05
+    assert np.median(proxy.triangle_quality(coarse)) > 0.8
+
+
 def test_the_proxy_setting():
     assert proxy_size(PROXY_ABOVE, "auto") is None and proxy_size(PROXY_ABOVE + 1, "auto") == PROXY_VERTICES
     assert proxy_size(10**6, None) is None and proxy_size(10**6, 0) is None
