@@ -21,7 +21,7 @@ from .graph import Graph, mesh_graph
 from .nn import GeoConv, GeoPool, GeoUnpool, Hierarchy, ResBlocks, build_hierarchy
 from .precision import resolve
 from .queries.embedding import Embedding
-from .queries.proxy import decimate, proxy_places, proxy_size
+from .queries.proxy import cloud_subset, cloud_weights, decimate, proxy_places, proxy_size
 from .threads import beside, fewer_for_torch
 
 __all__ = ["GeGnnConfig", "GeGnn", "DistanceDecoder", "LandmarkDecoder", "SpectralDecoder"]
@@ -136,7 +136,8 @@ class GeGnn(nn.Module):
         (20,000) (``proxy``: ``"auto"``, another vertex count, or None for the mesh itself;
         :mod:`gegnn.queries.proxy`): the network and fields run at the resolution the model knows, every vertex
         of the mesh gets the code of its closest point on the proxy, and all queries answer on the mesh's own
-        vertices. With more than one torch thread
+        vertices. A cloud of more points likewise: a random subset of that size is embedded, and every point
+        gets the blend of its 3 nearest subset points' codes. With more than one torch thread
         (``torch.set_num_threads``) the U-Net runs on a thread of its own while the fields are computed,
         and a cloud's row-wise steps are spread over the threads (:mod:`gegnn.threads`); the result is the
         same to the bit.
@@ -149,9 +150,16 @@ class GeGnn(nn.Module):
         if device is not None:  # outside inference mode: moved parameters stay trainable
             self.to(device)
         with torch.inference_mode():
-            target = None if faces is None or self.config.points else proxy_size(len(vertices), proxy)
+            target = proxy_size(len(vertices), proxy)
             if target is None:
                 return self._embed(vertices, faces, precision, normals)
+            if self.config.points:  # a cloud: a subset embedded, each point blended from its 3 nearest there
+                points = np.asarray(vertices, dtype=np.float64)
+                subset = cloud_subset(points, target)
+                emb = self._embed(points[subset], faces, precision, None if normals is None else
+                                  np.asarray(normals)[subset])
+                corners, weights = cloud_weights(points, subset)
+                return emb.blended(corners, weights, part=emb.part[corners[:, 0]])
             vertices, faces = _validated(vertices, faces)
             coarse = decimate(vertices, faces, target)
             places = proxy_places(vertices, coarse)

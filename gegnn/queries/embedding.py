@@ -120,8 +120,8 @@ class Embedding:
                 out = torch.cat(parts) if parts else torch.empty(0, device=device)
         return out.reshape(shape).cpu().numpy()
 
-    def at_points(self, face, bary, vertices: np.ndarray | None = None, faces: np.ndarray | None = None,
-                  chunk: int = 1 << 16) -> "Embedding":
+    def at_points(self, face, bary, vertices: np.ndarray | None = None, faces: np.ndarray | None = None
+                  ) -> "Embedding":
         """An embedding of surface points (each a face and barycentric coordinates, (P,) and (P, 3), as
         :meth:`surface_distance` takes them) whose codes are their blends: its :meth:`distance` between
         points ``a`` and ``b`` is :meth:`surface_distance` between them, and every other query (fields,
@@ -129,10 +129,21 @@ class Embedding:
         vertices of, if any (another mesh of the same surface: a full-resolution mesh embedded through a
         coarse proxy, a decimated display surface), for the geometric queries."""
         corners, weights, _, _ = self._points(np.asarray(face).reshape(-1), np.asarray(bary).reshape(-1, 3))
+        return self.blended(corners, weights, vertices, faces)
+
+    def blended(self, corners, weights, vertices: np.ndarray | None = None, faces: np.ndarray | None = None,
+                part: np.ndarray | None = None, chunk: int = 1 << 16) -> "Embedding":
+        """An embedding whose row p is the blend of rows ``corners[p]`` (P, 3) with ``weights[p]`` (P, 3; >= 0,
+        summing to 1) by the decoder's ``point_codes``: points inside faces (:meth:`at_points`), or the points of
+        a dense cloud between the points of its embedded subset. ``vertices``, ``faces``, ``part``: as for any
+        Embedding."""
+        device = self.features.device
+        corners = torch.as_tensor(np.asarray(corners, dtype=np.int64), device=device)
+        weights = torch.as_tensor(np.asarray(weights, dtype=np.float32), device=device)
         with torch.inference_mode():
             codes = torch.cat([self._blend(corners[s:s + chunk], weights[s:s + chunk])
                                for s in range(0, len(corners), chunk)]) if len(corners) else self.features[:0]
-        return Embedding(codes, self.decoder, self.scale, self.precision, vertices=vertices, faces=faces)
+        return Embedding(codes, self.decoder, self.scale, self.precision, vertices=vertices, faces=faces, part=part)
 
     def locate(self, points):
         """The closest surface point of each xyz point (P, 3) (in the mesh's units), as

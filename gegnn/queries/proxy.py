@@ -1,8 +1,9 @@
-"""A large mesh embedded through a proxy: the same surface with fewer vertices (QEM edge collapse), embedded
+"""A large mesh embedded through a proxy: the same surface with fewer vertices (edge collapse and remesh), embedded
 once; every vertex of the large mesh then gets the code of its closest point on the proxy (a blend of the
 proxy's vertex codes, :meth:`gegnn.queries.embedding.Embedding.at_points`). The network and the landmark
 fields run at the resolution the model was trained at, whatever the user's resolution; what scales with the
 user's mesh is the decimation and one closest-point query per vertex (libigl's AABB tree), both near-linear.
+A large point cloud likewise: a random subset embedded, every point blended from its 3 nearest subset points.
 """
 from __future__ import annotations
 
@@ -11,7 +12,8 @@ import numpy as np
 from geodata.mesh import Mesh
 from geodata.surface_points import SurfacePoints, locate_points
 
-__all__ = ["PROXY_ABOVE", "PROXY_VERTICES", "proxy_size", "decimate", "triangle_quality", "proxy_places"]
+__all__ = ["PROXY_ABOVE", "PROXY_VERTICES", "proxy_size", "decimate", "triangle_quality", "cloud_subset",
+           "cloud_weights", "proxy_places"]
 
 PROXY_ABOVE = 40_000  # meshes with more vertices are embedded through a proxy (docs/benchmarks.md)
 PROXY_VERTICES = 20_000  # the proxy's vertex count
@@ -68,6 +70,27 @@ def triangle_quality(mesh: Mesh) -> np.ndarray:
     edges = p - np.roll(p, 1, axis=1)
     area = 0.5 * np.linalg.norm(np.cross(edges[:, 0], edges[:, 1]), axis=1)
     return 4 * np.sqrt(3) * area / np.maximum((edges ** 2).sum(axis=(1, 2)), np.finfo(float).tiny)
+
+
+def cloud_subset(points: np.ndarray, target: int, seed: int = 0) -> np.ndarray:
+    """``target`` distinct points of a cloud (indices, sorted), drawn uniformly at random with a fixed seed:
+    a scan's density carries over, as the area-uniform samples the point model was trained on do."""
+    distinct = np.unique(np.asarray(points, dtype=np.float64), axis=0, return_index=True)[1]
+    pick = np.random.default_rng(seed).choice(len(distinct), min(target, len(distinct)), replace=False)
+    return np.sort(distinct[pick])
+
+
+def cloud_weights(points: np.ndarray, subset: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For every point, its 3 nearest points of ``subset`` (indices into the subset, (N, 3)) and inverse-distance
+    weights summing to 1 ((N, 3)); a point of the subset is its own blend (weight 1)."""
+    from scipy.spatial import cKDTree
+
+    points = np.asarray(points, dtype=np.float64)
+    dist, idx = cKDTree(points[subset]).query(points, k=3)
+    inv = 1.0 / np.maximum(dist, 1e-12 * max(np.ptp(points, axis=0).max(), 1e-300))
+    exact = dist[:, 0] <= 0
+    inv[exact] = (1.0, 0.0, 0.0)
+    return idx, inv / inv.sum(axis=1, keepdims=True)
 
 
 def proxy_places(vertices: np.ndarray, proxy: Mesh) -> SurfacePoints:
