@@ -20,18 +20,66 @@ import numpy as np
 from geodata.mesh import Mesh, MeshError, require_closed_manifold, vertex_components
 
 __all__ = ["BACKENDS", "geodesic_solver", "exact_geodesic_distances", "sample_sources", "exact_geodesic_pairs",
-           "polyline_length", "edge_flip_paths"]
+           "polyline_length", "edge_flip_paths", "exact_memory_estimate", "available_memory"]
 
 BACKENDS = ("vtp", "gdist", "libigl")
+# The vtp solver keeps every window of a source (48 bytes each) in one block that doubles as it grows. The
+# growth of the peak resident memory of one solve, 40k-320k vertices, regular and irregular meshes, was
+# 39-40 N^1.5 bytes (benchmarks/bench_exact_scaling.py, docs/benchmarks.md); MEMORY_MARGIN over it for
+# meshes that need more windows. Under RLIMIT_DATA the block's unused doubled capacity counts too: a
+# solve the estimate lets through may still end in bad_alloc, which run_isolated reports as out of memory.
+MEMORY_SCALE, MEMORY_POWER, MEMORY_MARGIN = 40.0, 1.5, 1.25
+
+
+def exact_memory_estimate(n_vertices: int) -> int:
+    """Bytes the vtp solver is expected to allocate for one source on a mesh of ``n_vertices`` (with
+    MEMORY_MARGIN over the measured fit; meshes of other shapes and qualities vary around it)."""
+    return int(MEMORY_MARGIN * MEMORY_SCALE * float(n_vertices) ** MEMORY_POWER)
+
+
+def available_memory() -> int:
+    """Bytes this process may still allocate: its RLIMIT_DATA less its data segment (``run_isolated``
+    under --max-memory sets it) where set; else the least of the cgroup's memory limit and the
+    machine's MemAvailable."""
+    import resource
+
+    from geodata.parallel import _cgroup_memory
+
+    soft = resource.getrlimit(resource.RLIMIT_DATA)[0]
+    if soft != resource.RLIM_INFINITY:
+        return max(0, soft - _status_kib("VmData:", "/proc/self/status") * 1024)
+    limits = [m for m in (_cgroup_memory(), _status_kib("MemAvailable:", "/proc/meminfo") * 1024) if m]
+    return min(limits) if limits else 1 << 62
+
+
+def _status_kib(key: str, path: str) -> int:
+    """A ``key: <n> kB`` line of a /proc file, in KiB (0 where absent)."""
+    try:
+        with open(path) as file:
+            line = next((line for line in file if line.startswith(key)), "")
+    except OSError:
+        return 0
+    return int(line.split()[1]) if line else 0
+
+
+def _require_memory(n_vertices: int) -> None:
+    """MeshError("geodesic", ...) before a solve whose estimate exceeds the memory available."""
+    need, have = exact_memory_estimate(n_vertices), available_memory()
+    if need > have:
+        raise MeshError("geodesic", f"the exact solver would need ~{need / 2 ** 30:.1f} GiB for one source on "
+                                    f"{n_vertices} vertices; {have / 2 ** 30:.1f} GiB available")
 
 
 def geodesic_solver(mesh: Mesh, backend: str = "vtp") -> Callable[[int], np.ndarray]:
     """A function source -> exact geodesic distances (float64, (N,)) from that vertex to every vertex.
 
     Only distances within the source's connected component are meaningful (vtp and gdist give inf
-    elsewhere, libigl 0). Whatever a backend precomputes for the mesh is done once, here.
+    elsewhere, libigl 0). Whatever a backend precomputes for the mesh is done once, here. A mesh whose
+    one-source vtp solve is estimated to need more memory than is available (:func:`exact_memory_estimate`,
+    :func:`available_memory`) is refused here, before anything is allocated, with MeshError("geodesic").
     """
     if backend == "vtp":
+        _require_memory(mesh.n_vertices)
         from geodata._exact_geodesic import Surface
 
         surface = Surface(np.ascontiguousarray(mesh.vertices, dtype=np.float64),
