@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from ..model import PRETRAINED
+from ..pictures.display import DISPLAY_VERTICES
 from .inputs import (_click_errors, _embed_cloud, _load_cloud, _load_mesh, _load_model, _model_and_meshes,
                      _model_config, _output_suffix)
 from .options import DEVICE_OPTION, MODEL_ARG, PRECISION_OPTION, PREPARE_OPTION, PRETRAINED_HELP, SIZE_OPTION, UP_OPTION
@@ -23,13 +24,18 @@ from .options import DEVICE_OPTION, MODEL_ARG, PRECISION_OPTION, PREPARE_OPTION,
                                             "predicted, exact and relative error for them.")
 @click.option("--mesh", "cloud_mesh", type=click.Path(exists=True, dir_okay=False),
               help="With a point-cloud model and --exact: the mesh the cloud was taken from.")
-@click.option("--dtype", type=click.Choice(["float32", "float16"]), default="float32", show_default=True,
-              help="Codes in the page (float16: half the size; distances move by ~1e-3 relative).")
+@click.option("--dtype", type=click.Choice(["auto", "float32", "float16"]), default="auto", show_default=True,
+              help="Codes in the page (float16: half the size; distances move by ~1e-3 relative; auto: float32 "
+                   "up to 64 MiB of codes, ~51k vertices at K = 256, float16 above).")
+@click.option("--display-vertices", type=click.IntRange(min=0), default=DISPLAY_VERTICES, show_default=True,
+              help="A mesh with more vertices is drawn decimated to this many, a cloud with more points as a "
+                   "random sample of this many (0: never).")
 @PREPARE_OPTION
 @DEVICE_OPTION
 @PRECISION_OPTION
 @UP_OPTION
-def view(files, pretrained, output, sources, exact, cloud_mesh, dtype, prepare, device, precision, up):
+def view(files, pretrained, output, sources, exact, cloud_mesh, dtype, display_vertices, prepare, device, precision,
+         up):
     """An interactive page of MESH, or of a point cloud with a point-cloud model: coloured by the distance
     field of a vertex (a point), with isolines; click any vertex and the page decodes its field at once
     from the codes of one forward pass, with the model's own decoder (no server, no network: one
@@ -45,9 +51,13 @@ def view(files, pretrained, output, sources, exact, cloud_mesh, dtype, prepare, 
       gegnn view --pretrained points scan.xyz --source 0 --exact --mesh scan.obj -o compare.html
 
     The page holds the mesh and the codes (N x 324 values for the default landmark model, K = 256: 8.2 MiB
-    at 4,762 vertices, half with --dtype float16). With --prepare it shows the remeshed mesh, numbered as such. A cloud
-    (.xyz .txt .pts .csv .npy, or a PLY without faces) is drawn as discs of about its points' spacing,
-    numbered as in its file; points far from all others are left out.
+    at 4,762 vertices, half with --dtype float16). A mesh of more than --display-vertices is drawn
+    decimated (quadric edge collapse) to that many, each display vertex with the full embedding's
+    distances at its point and named by the mesh vertex nearest it, and the page says how much: a mesh
+    of 1M vertices is drawn at 10%, in a page of 88 MiB whose clicks decode in about 1 s. With --prepare
+    it shows the remeshed mesh, numbered as such. A cloud (.xyz .txt .pts .csv .npy, or a PLY without
+    faces) is drawn as discs of about its points' spacing, numbered as in its file (a random sample of
+    --display-vertices points if it has more); points far from all others are left out.
     """
     import numpy as np
 
@@ -60,8 +70,8 @@ def view(files, pretrained, output, sources, exact, cloud_mesh, dtype, prepare, 
     if config.points:
         if prepare:
             raise click.UsageError("--prepare remeshes a mesh: a point cloud is shown as it is")
-        return _view_cloud(spec, pretrained, mesh_path, sources, exact, cloud_mesh, output, dtype, device, precision,
-                           up)
+        return _view_cloud(spec, pretrained, mesh_path, sources, exact, cloud_mesh, output, dtype, display_vertices,
+                           device, precision, up)
     if cloud_mesh:
         raise click.UsageError("--mesh goes with a point-cloud model (the file is the mesh here)")
     qm = _load_mesh(mesh_path, prepare)
@@ -83,14 +93,17 @@ def view(files, pretrained, output, sources, exact, cloud_mesh, dtype, prepare, 
     page = view_page(emb, title=f"{name}: {config.distance} distance predicted by GeGnn",
                      meta=f"{len(qm.mesh.vertices):,} vertices, {len(qm.mesh.faces):,} faces"
                           + (" (remeshed by --prepare)" if prepare else "") + f"; model {model}; distances in the "
-                          "mesh's units", sources=net_sources, exact=fields, file_index=file_index, up=up, dtype=dtype)
+                          "mesh's units", sources=net_sources, exact=fields, file_index=file_index, up=up, dtype=dtype,
+                     display_vertices=display_vertices)
     Path(output).write_text(page, encoding="utf-8")
-    click.echo(f"{name}: {len(qm.mesh.vertices):,} vertices; written {output} ({len(page) / 2 ** 20:.1f} MB): "
+    shown = ("" if len(qm.mesh.vertices) <= (display_vertices or np.inf)
+             else f", drawn decimated to about {display_vertices:,}")
+    click.echo(f"{name}: {len(qm.mesh.vertices):,} vertices{shown}; written {output} ({len(page) / 2 ** 20:.1f} MB): "
                "open it in a browser")
 
 
-def _view_cloud(model_spec, pretrained, cloud_path, sources, exact, mesh_path, output, dtype, device, precision,
-                up):
+def _view_cloud(model_spec, pretrained, cloud_path, sources, exact, mesh_path, output, dtype, display_vertices,
+                device, precision, up):
     """``gegnn view`` with a point-cloud model: the page of the cloud's points (outliers left out)."""
     import numpy as np
 
@@ -117,10 +130,12 @@ def _view_cloud(model_spec, pretrained, cloud_path, sources, exact, mesh_path, o
                      meta=f"{len(points):,} points of {len(cloud.points):,}"
                           f"{'' if normals is None else ' with normals'}; {int(emb.part.max()) + 1} part(s) in the "
                           f"{model.config.points}-neighbour graph; model {label}; distances in the cloud's units",
-                     sources=local, exact=fields, file_index=keep, up=up, dtype=dtype, normals=normals)
+                     sources=local, exact=fields, file_index=keep, up=up, dtype=dtype, normals=normals,
+                     display_vertices=display_vertices)
     Path(output).write_text(page, encoding="utf-8")
-    click.echo(f"{name}: {len(points):,} points; written {output} ({len(page) / 2 ** 20:.1f} MB): open it in a "
-               "browser")
+    shown = "" if len(points) <= (display_vertices or np.inf) else f", drawn as a sample of {display_vertices:,}"
+    click.echo(f"{name}: {len(points):,} points{shown}; written {output} ({len(page) / 2 ** 20:.1f} MB): open it in "
+               "a browser")
 
 
 @click.command(context_settings={"max_content_width": 100})

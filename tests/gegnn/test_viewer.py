@@ -247,3 +247,150 @@ def test_gegnn_view_of_a_cloud_numbers_points_as_the_file_does(browser, tmp_path
     assert "mean relative error vs exact" in page.inner_text("#gegnn-source")
     assert "click: the field of that point" in page.inner_text("body")
     page.close()
+
+
+# -- a mesh too large for a page: drawn decimated, clicks decoding the full embedding -----------------------
+def page_data(text: str) -> dict:
+    """The page's data: its JSON, each array (a {dtype, data} blob) as a NumPy array."""
+    import base64
+    import json
+
+    data = json.loads(re.search(r'<script id="gegnn-data" type="application/json">(.*?)</script>', text,
+                                re.S).group(1).replace("<\\/", "</"))
+
+    def arrays(x):
+        if isinstance(x, dict) and set(x) == {"dtype", "data"}:
+            return np.frombuffer(base64.b64decode(x["data"]), dtype=np.dtype(x["dtype"]).newbyteorder("<"))
+        return {k: arrays(v) for k, v in x.items()} if isinstance(x, dict) else x
+    return arrays(data)
+
+
+def test_gegnn_view_draws_a_mesh_above_its_display_budget_decimated(browser, tmp_path):
+    """--display-vertices below the mesh's count: the page shows that many vertices, says so, names each by
+    the file vertex nearest it, and puts the sources exactly on their vertices (exact field 0 there)."""
+    from click.testing import CliRunner
+
+    from gegnn.cli import main
+
+    part = bumpy_sphere(300, seed=3)
+    lines = ["v 9 9 9"] + [f"v {x} {y} {z}" for x, y, z in part.vertices]  # file vertex 0 is used by no face
+    lines += [f"f {a + 2} {b + 2} {c + 2}" for a, b, c in part.faces]
+    (tmp_path / "m.obj").write_text("\n".join(lines) + "\n")
+    result = CliRunner().invoke(main, ["view", "--pretrained", str(tmp_path / "m.obj"), "--display-vertices", "150",
+                                       "--source", "3", "--source", "10", "--exact", "-o", str(tmp_path / "v.html")])
+    assert result.exit_code == 0, result.output
+    assert "300 vertices, drawn decimated to about 150" in result.output
+    text = (tmp_path / "v.html").read_text()
+    data = page_data(text)
+    assert data["display"] == {"vertices": 300, "faces": len(part.faces), "numbering": "file"}
+    vertices = data["vertices"].reshape(-1, 3)
+    assert len(vertices) == 150 and len(data["faces"]) == 3 * (2 * 150 - 4)  # a closed mesh: exactly the budget
+    sources = data["sources"]
+    assert data["file_index"][sources].tolist() == [3, 10]  # the file's numbers
+    np.testing.assert_allclose(vertices[sources], part.vertices[[2, 9]], atol=1e-6)  # on the sources exactly
+    assert all(data["exact"][str(s)][s] < 1e-6 for s in sources)
+    assert "drawn decimated: 150 of 300 vertices (50.0%)" in text
+    page = open_page(browser, tmp_path, text)
+    assert "source: near vertex 3 ·" in page.inner_text("#gegnn-source")
+    page.close()
+
+
+LARGE_SOURCE = 123_456
+
+
+@pytest.fixture(scope="module")
+def large():
+    """A stretched icosphere of 655,362 vertices (the model embeds it through its proxy), its page with
+    the default display budget, and the page's data."""
+    import trimesh
+
+    sphere = trimesh.creation.icosphere(8)
+    emb = GeGnn.pretrained("landmark").embed(np.asarray(sphere.vertices) * [1.3, 1.0, 0.8], np.asarray(sphere.faces))
+    text = view_page(emb, title="large", sources=[LARGE_SOURCE])
+    return emb, text, page_data(text)
+
+
+def page_embedding(emb, data):
+    """The page's codes as an Embedding with the model's decoder: what the page decodes."""
+    import torch
+
+    from gegnn.queries.embedding import Embedding
+    codes = torch.from_numpy(data["codes"].astype(np.float32).reshape(-1, data["code_width"]))
+    return Embedding(codes, emb.decoder, emb.scale)
+
+
+def test_a_large_mesh_is_drawn_decimated_within_the_page_budget(large):
+    """655k vertices: a page under 100 MB of DISPLAY_VERTICES display vertices on the surface, each with the
+    full embedding's code at its point (float16), decoding the full embedding's surface_distance."""
+    from gegnn.pictures.display import DISPLAY_VERTICES
+
+    emb, text, data = large
+    assert len(text.encode()) < 100e6
+    assert data["codes"].dtype == np.float16  # dtype "auto" above 64 MiB of float32 codes
+    n = len(emb.vertices)
+    assert data["display"] == {"vertices": n, "faces": len(emb.faces), "numbering": "mesh"}
+    assert f"drawn decimated: {DISPLAY_VERTICES:,} of {n:,} vertices ({100 * DISPLAY_VERTICES / n:.1f}%)" in text
+    vertices = data["vertices"].reshape(-1, 3).astype(np.float64)
+    assert len(vertices) == DISPLAY_VERTICES and len(data["faces"]) == 3 * (2 * DISPLAY_VERTICES - 4)
+    place = emb.locate(vertices)
+    assert place.offset.max() < 1e-6 * emb.scale  # on the surface (float32 rounding)
+    source = data["sources"][0]
+    np.testing.assert_allclose(vertices[source], emb.vertices[LARGE_SOURCE], atol=1e-6 * emb.scale)
+    assert data["file_index"][source] == LARGE_SOURCE
+    # the codes are the full embedding's blends at the display points, to float16's rounding
+    full = emb.at_points(place.face, place.bary).features.numpy()
+    ulp = np.spacing(np.abs(full).astype(np.float16)).astype(np.float32)
+    worst = (np.abs(data["codes"].reshape(full.shape).astype(np.float32) - full) / ulp).max()
+    assert worst <= 1, f"codes {worst:.2f} float16 steps from the full embedding's at the display points"
+    # and decode to the full embedding's distances between those points
+    in_page = page_embedding(emb, data)
+    for v in (source, 5_000):
+        truth = emb.surface_distance(place.face[v], place.bary[v], place.face, place.bary)
+        decoded = in_page.field(v)
+        far = truth > 0.1 * truth.max()
+        assert np.median(np.abs(decoded[far] / truth[far] - 1)) < 1e-3  # float16 codes (as above)
+        assert np.abs(decoded - truth).max() < 5e-3 * emb.scale
+
+
+def test_a_click_on_a_large_meshs_page_decodes_the_full_embedding(browser, tmp_path, large):
+    emb, text, data = large
+    page = open_page(browser, tmp_path, text)
+    # no file_index: named in the embedded mesh's numbering (as a page of a remeshed file says)
+    assert f"source: near vertex {LARGE_SOURCE} (of the remeshed mesh) ·" in page.inner_text("#gegnn-source")
+    assert "drawn decimated: 100,000 of 655,362 vertices" in page.inner_text("header")
+    box = page.locator("#gegnn-canvas").bounding_box()
+    x, y = box["x"] + box["width"] * 0.45, box["y"] + box["height"] * 0.5
+    target = page.evaluate(f"gegnn.pick({x}, {y})")
+    assert target >= 0 and target != data["sources"][0]
+    frames = int(page.evaluate("document.body.dataset.frames"))
+    page.mouse.click(x, y)
+    page.wait_for_function(f"document.body.dataset.frames > {frames}")
+    assert page.evaluate("gegnn.source()") == target
+    shown = np.array(page.evaluate("gegnn.shown()"), dtype=float)
+    np.testing.assert_allclose(shown, page_embedding(emb, data).field(target), rtol=2e-5, atol=1e-6 * emb.scale)
+    place = emb.locate(data["vertices"].reshape(-1, 3).astype(np.float64))
+    truth = emb.surface_distance(place.face[target], place.bary[target], place.face, place.bary)
+    assert np.abs(shown - truth).max() < 5e-3 * emb.scale
+    print(f"a click on {len(shown):,} display vertices of {len(emb.vertices):,}: decoded in "
+          f"{page.evaluate('document.body.dataset.decodeMs')} ms ({len(text) / 2 ** 20:.1f} MiB page)")
+    page.close()
+
+
+def test_a_cloud_above_the_display_budget_is_drawn_as_a_sample(browser, tmp_path, cloud):
+    """A cloud of more points than display_vertices: that many of its points, the sources among them, each
+    with its own code and the file's number."""
+    emb = GeGnn.pretrained("points").embed(cloud)
+    text = view_page(emb, title="sampled", sources=[7, 1350], display_vertices=500)
+    data = page_data(text)
+    keep = data["file_index"]
+    assert len(keep) == 500 and len(np.unique(keep)) == 500 and data["display"] == {"points": 1500}
+    assert keep[data["sources"]].tolist() == [7, 1350]
+    np.testing.assert_array_equal(data["codes"].reshape(500, -1), emb.features.numpy()[keep])
+    np.testing.assert_array_equal(data["vertices"].reshape(-1, 3), cloud[keep].astype(np.float32))
+    page = open_page(browser, tmp_path, text)
+    assert "drawn sampled: 500 of 1,500 points (33.3%, at random)" in page.inner_text("header")
+    assert "source: point 7 ·" in page.inner_text("#gegnn-source")
+    expected = np.where(emb.part == emb.part[1350], emb.field(1350), np.nan)[keep]
+    np.testing.assert_allclose(np.array(page.evaluate(f"gegnn.field({data['sources'][1]})"), dtype=float), expected,
+                               rtol=2e-5, atol=1e-6 * emb.scale)
+    page.close()

@@ -32,6 +32,7 @@
   const NORMALS = CLOUD ? array(DATA.normals) : null;
   const COMPONENT = array(DATA.component), N = V.length / 3, NF = F.length / 3, C = DATA.code_width;
   const LABEL = DATA.file_index ? array(DATA.file_index) : null;  // mesh vertex -> the file's numbering
+  const DECIMATED = !CLOUD && DATA.display;  // a decimated display: LABEL, the mesh's vertex nearest each
   const EXACT = {};
   for (const [src, blob] of Object.entries(DATA.exact || {})) EXACT[src] = array(blob);
   const LUTS = { viridis: array(DATA.luts.viridis), magma: array(DATA.luts.magma) };
@@ -306,6 +307,7 @@
   const $ = (id) => document.getElementById(id);
   function label(v) {
     const what = CLOUD ? "point" : "vertex";
+    if (DECIMATED) return `near vertex ${LABEL[v]}${DECIMATED.numbering === "mesh" ? " (of the remeshed mesh)" : ""}`;
     return LABEL ? `${what} ${LABEL[v]}` : `${what} ${v}${CLOUD ? "" : " (of the remeshed mesh)"}`;
   }
   function fmt(x) { return Number.isNaN(x) ? "no distance (another part)" : x.toPrecision(4); }
@@ -362,7 +364,7 @@
 
   function showCursor(x, y) {  // the value drawn under the pointer
     const [v, value] = pick(x, y), error = state.mode === "error";
-    $("gegnn-cursor").textContent = v < 0 ? "" : `under the cursor: near ${label(v)}, ` +
+    $("gegnn-cursor").textContent = v < 0 ? "" : `under the cursor: ${DECIMATED ? "" : "near "}${label(v)}, ` +
       (error ? `relative error ${(100 * value).toFixed(2)}%` : `${state.mode} distance ${fmt(value)}`);
   }
 
