@@ -70,21 +70,21 @@ SAME_UP_TO = 10_000     # meshes of at most this many vertices keep t = t_coef h
 RESOLUTION = 90         # beyond: t = t_coef hbar^2 max(1, (D / hbar) / RESOLUTION), D the bounding-box diagonal
 
 
-def time_step(hbar: float, diagonal: float, n: int, t_coef: float = 0.5) -> float:
+def time_step(hbar: float, diagonal: float, n: int, t_coef: float = 0.5, same_up_to: int = SAME_UP_TO) -> float:
     """The heat step t for a mesh of ``n`` vertices, mean cover edge length ``hbar`` and bounding-box
-    diagonal ``diagonal``: ``t_coef hbar^2`` up to SAME_UP_TO vertices (the fields the shipped models were
+    diagonal ``diagonal``: ``t_coef hbar^2`` up to ``same_up_to`` vertices (the fields the shipped models were
     trained with, at ~5k), beyond ``t_coef hbar^2 max(1, (diagonal / hbar) / RESOLUTION)``, i.e. t grows
     as hbar D instead of hbar^2 once the mesh is fine: a step tied to hbar^2 alone loses the far field
     (bunny at 320k vertices: 11.5% off at t_coef 0.5). docs/benchmarks.md, "The heat method's time step"."""
     t = t_coef * (hbar * hbar)
-    return t if n <= SAME_UP_TO else t * max(1.0, diagonal / hbar / RESOLUTION)
+    return t if n <= same_up_to else t * max(1.0, diagonal / hbar / RESOLUTION)
 
 
-def poisson_shift(n: int) -> float:
-    """The Poisson system's shift for ``n`` vertices: POISSON_SHIFT up to SAME_UP_TO vertices, then
-    POISSON_SHIFT SAME_UP_TO / n, so that it stays as small against the Laplacian's lowest modes (whose
-    eigenvalues fall as 1 / n) as at SAME_UP_TO: unscaled it damps them, 3% of distance error at 385k."""
-    return POISSON_SHIFT * min(1.0, SAME_UP_TO / n)
+def poisson_shift(n: int, same_up_to: int = SAME_UP_TO) -> float:
+    """The Poisson system's shift for ``n`` vertices: POISSON_SHIFT up to ``same_up_to`` vertices, then
+    POISSON_SHIFT same_up_to / n, so that it stays as small against the Laplacian's lowest modes (whose
+    eigenvalues fall as 1 / n) as at ``same_up_to``: unscaled it damps them, 3% of distance error at 385k."""
+    return POISSON_SHIFT * min(1.0, same_up_to / n)
 
 
 def cover_problem(vertices, faces) -> str | None:
@@ -404,15 +404,17 @@ class HeatDistance(HeatSolver):
     Args:
         vertices: (N, 3) float.
         faces: (F, 3) int; see :func:`cover_problem` for what is supported (ValueError otherwise).
-        t_coef: time step over the mean squared cover edge length, on meshes of up to SAME_UP_TO vertices;
+        t_coef: time step over the mean squared cover edge length, on meshes of up to ``same_up_to`` vertices;
             on larger meshes :func:`time_step` scales it up with the resolution.
+        same_up_to: where that starts (SAME_UP_TO; a model's landmark fields keep the step it was trained
+            with further: :data:`gegnn.fields.landmarks.MODEL_STEP_UP_TO`).
 
     Attributes:
         n: vertex count; t: the time step; shift: the Poisson shift (:func:`poisson_shift`); hbar: the mean
         cover edge length after mollification and flips; n_flips: intrinsic flips made on the cover.
     """
 
-    def __init__(self, vertices, faces, t_coef: float = 0.5):
+    def __init__(self, vertices, faces, t_coef: float = 0.5, same_up_to: int = SAME_UP_TO):
         v = np.ascontiguousarray(vertices, dtype=np.float64)
         f = np.ascontiguousarray(faces, dtype=np.int64)
         problem = cover_problem(v, f)
@@ -423,6 +425,6 @@ class HeatDistance(HeatSolver):
         mollify(cover, cover.length.sum() / len(cover.length))
         self.n_flips = flip_to_delaunay(cover)
         self.hbar = cover.length.sum() / len(cover.length)
-        self.t = time_step(self.hbar, float(np.linalg.norm(np.ptp(v, axis=0))), self.n, t_coef)
-        self.shift = poisson_shift(self.n)
+        self.t = time_step(self.hbar, float(np.linalg.norm(np.ptp(v, axis=0))), self.n, t_coef, same_up_to)
+        self.shift = poisson_shift(self.n, same_up_to)
         self._factor("heat method", *operators(cover, self.n))

@@ -36,10 +36,17 @@ import numpy as np
 
 from geodata.mesh import Mesh, label_groups, vertex_components
 
-from .heat import SAME_UP_TO, HeatDistance
+from .heat import HeatDistance
 
 __all__ = ["LandmarkFields", "landmark_fields", "landmark_solver", "farthest_point_fields", "graph_farthest_points",
-           "landmark_columns", "T_COEF"]
+           "landmark_columns", "T_COEF", "MODEL_STEP_UP_TO"]
+
+# Landmark fields keep the heat step the models were trained with (t_coef hbar^2) up to here: the model reads
+# them as it learned them. On spot / bumpy at 20k-80k vertices the dense-mesh step of gegnn.fields.heat made
+# the shipped model worse (0.70/0.67/0.44% -> 0.81/0.81/0.61%); meshes above 40,000 vertices meet the model as
+# a 20,000-vertex proxy anyway (gegnn.queries.proxy). Beyond (a proxy turned off), the far field needs the
+# dense-mesh step.
+MODEL_STEP_UP_TO = 100_000
 
 T_COEF = 0.5
 TIE = 1e-9  # farthest-point ties: relative to the largest distance
@@ -129,11 +136,12 @@ def landmark_solver(vertices, faces, k: int, t_coef: float = T_COEF) -> Callable
 def _heat_field(vertices, faces, t_coef: float, fields: int):
     """``field(source) -> (N,)``: potpourri3d's robust heat method, by :class:`gegnn.fields.heat.HeatDistance`
     where that pays (see the module), by potpourri3d itself elsewhere and on meshes that HeatDistance does
-    not cover (:func:`gegnn.fields.heat.cover_problem`). Beyond SAME_UP_TO vertices always HeatDistance,
-    whose time step then grows with the resolution (:func:`gegnn.fields.heat.time_step`)."""
-    if len(vertices) > SAME_UP_TO or (len(vertices) >= HEAT_MIN_VERTICES and fields >= HEAT_MIN_FIELDS):
+    not cover (:func:`gegnn.fields.heat.cover_problem`). Beyond MODEL_STEP_UP_TO vertices always HeatDistance,
+    whose time step then grows with the resolution (:func:`gegnn.fields.heat.time_step`); up to there the
+    step the shipped models were trained with."""
+    if len(vertices) > MODEL_STEP_UP_TO or (len(vertices) >= HEAT_MIN_VERTICES and fields >= HEAT_MIN_FIELDS):
         try:
-            return HeatDistance(vertices, faces, t_coef).distance
+            return HeatDistance(vertices, faces, t_coef, same_up_to=MODEL_STEP_UP_TO).distance
         except ValueError:
             pass
     import potpourri3d as pp3d

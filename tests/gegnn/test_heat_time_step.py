@@ -48,3 +48,24 @@ def test_dense_sphere_heat_field_matches_great_circles():
     err = relative_errors(solver.distance(source), exact, source)
     assert err.mean() < 0.015
     assert np.percentile(err, 99) < 0.02
+
+
+def test_a_models_landmark_fields_keep_the_trained_step_up_to_model_step_up_to(monkeypatch):
+    """Between SAME_UP_TO and MODEL_STEP_UP_TO vertices the heat method answers with the dense-mesh step, but
+    the landmark fields a model reads keep t_coef hbar^2 (what it was trained with: the dense step cost the
+    shipped model 0.11-0.17 points at 20k-80k vertices)."""
+    import trimesh
+
+    import gegnn.fields.landmarks as landmarks
+    from gegnn.fields.heat import SAME_UP_TO, HeatDistance
+
+    sphere = trimesh.creation.icosphere(6)
+    v, f = np.asarray(sphere.vertices) * np.array([1.0, 0.6, 0.4]), np.asarray(sphere.faces)
+    assert SAME_UP_TO < len(v) <= landmarks.MODEL_STEP_UP_TO
+    dense, trained = HeatDistance(v, f), HeatDistance(v, f, same_up_to=landmarks.MODEL_STEP_UP_TO)
+    assert dense.t > 1.5 * trained.t and trained.t == pytest.approx(0.5 * trained.hbar ** 2, rel=1e-12)
+    used = []
+    real = landmarks.HeatDistance
+    monkeypatch.setattr(landmarks, "HeatDistance", lambda *a, **k: used.append(real(*a, **k)) or used[-1])
+    landmarks.landmark_fields(v, f, landmarks.HEAT_MIN_FIELDS, 0)  # enough fields for HeatDistance
+    assert [h.t for h in used] == [trained.t]

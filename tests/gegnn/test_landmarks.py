@@ -498,7 +498,7 @@ def test_landmarks_unchanged_from_potpourri3d_selection(monkeypatch):
     v = np.concatenate([p[0] + [4.0 * i, 0, 0] for i, p in enumerate(parts)])
     f = np.concatenate([p[1] + sum(len(q[0]) for q in parts[:i]) for i, p in enumerate(parts)])
     used = []
-    monkeypatch.setattr(landmarks_module, "HeatDistance", lambda *a: used.append(len(a[0])) or HeatDistance(*a))
+    monkeypatch.setattr(landmarks_module, "HeatDistance", lambda *a, **k: used.append(len(a[0])) or HeatDistance(*a, **k))
     ours = landmark_fields(v, f, 40, seed=5)
     assert used == [642, 642]  # the 196-vertex grid and the 42-vertex sphere are too small to pay
     import potpourri3d as pp3d
