@@ -109,6 +109,7 @@ def main() -> None:
     ap.add_argument("--kinds", nargs="+", default=["regular", "irregular"])
     ap.add_argument("--sources", type=int, default=6)
     ap.add_argument("--max-vertices", type=int, default=1_500_000, help="skip larger refinements")
+    ap.add_argument("--min-vertices", type=int, default=0, help="skip smaller refinements")
     args = ap.parse_args()
     from geodata.geodesic import geodesic_solver
     from geodata.mesh import Mesh
@@ -132,6 +133,8 @@ def main() -> None:
                     v, f = trimesh.remesh.subdivide(v, f) if kind == "regular" else split_randomly(v, f, rng)
                 if len(v) > args.max_vertices:
                     break
+                if len(v) < args.min_vertices:
+                    continue
                 seconds, field_s, peak, pred, _ = embed_in_child(v, f, n0, sources)
                 heat_s, heat_d = heat(v, f, sources, n0)
                 print(f"| {name} | {kind} | {len(v):,} | {seconds:.2f} | {peak:.2f} GB | {field_s:.2f} | "

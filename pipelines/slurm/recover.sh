@@ -82,7 +82,14 @@ resubmit() {  # STAGE DEPENDENCY SHARD...: submit these shards of STAGE again; p
 
 wait_on() {  # JOB DEPENDENCY: let the pending tasks of JOB wait on DEPENDENCY ("" releases them)
     if [ -n "$(awk -v job="$1" '$1 == job && $3 == "PENDING"' <<< "$queue")" ]; then
-        scontrol update JobId="$1" Dependency="$2" || fail "scontrol could not update job $1"
+        # A busy controller may refuse for a moment ("Requested partition configuration not available now"
+        # while a node does not respond): three tries, 5 s apart, then fail loudly.
+        local try
+        for try in 1 2 3; do
+            scontrol update JobId="$1" Dependency="$2" && break
+            [ "$try" = 3 ] && fail "scontrol could not update job $1"
+            sleep 5
+        done
         if [ -n "$2" ]; then echo "$1 waits on ${2#afterok:}"; else echo "released $1"; fi
     fi
 }
