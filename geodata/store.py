@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 import zarr
 
-__all__ = ["StoreError", "FORMAT", "SUBGROUPS", "create_store", "open_store", "geometry_key", "mesh_file", "write_mesh",
+__all__ = ["StoreError", "FORMAT", "SUBGROUPS", "create_store", "open_store", "geometry_key", "mesh_file", "publish", "write_mesh",
            "read_mesh", "mesh_attrs", "list_meshes", "record_failure", "clear_failure", "list_failures",
            "write_ledger", "read_ledgers", "temporary_files"]
 
@@ -113,8 +113,9 @@ def _chunks(data: np.ndarray) -> tuple[int, ...]:
     return (rows, *data.shape[1:])
 
 
-def _publish(tmp: Path, final: Path) -> bool:
-    """Give the finished file ``tmp`` its name ``final`` unless that exists; True when this call published."""
+def publish(tmp: Path, final: Path) -> bool:
+    """Give the finished file ``tmp`` its name ``final`` unless that exists (``tmp`` is removed either way); True
+    when this call published. Also the field cache's (:mod:`gegnn.fields.cache`)."""
     try:
         os.link(tmp, final)  # atomic, and never replaces: the first writer of a name wins
         return True
@@ -143,7 +144,7 @@ def write_mesh(out: str | Path, mesh_id: str, arrays: dict[str, np.ndarray], att
             group.create_array(name, data=np.ascontiguousarray(data), chunks=_chunks(data))
     finally:
         zip_store.close()
-    return _publish(tmp, final)
+    return publish(tmp, final)
 
 
 @contextlib.contextmanager

@@ -34,7 +34,6 @@ float32, rewritten in place while others could read it) is refused by name: its 
 """
 from __future__ import annotations
 
-import contextlib
 import io
 import json
 import multiprocessing
@@ -45,7 +44,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from geodata.store import geometry_key  # the key is recorded at prepare time: one formula for both
+from geodata.store import publish
 
 from .landmarks import landmark_solver
 from .spectral import spectral_codes
@@ -249,23 +248,11 @@ def _fields(key: str, vertices: np.ndarray, faces: np.ndarray, seeds: list, spec
 
 def _publish_bytes(path: Path, data: bytes) -> bool:
     """Write ``data`` to a temporary file beside ``path`` (flushed to disk: a node that fails later leaves no
-    named empty file), then give it ``path`` with ``os.link``, which fails where the name exists: the first
-    writer wins and the file is never rewritten. True when this call published."""
+    named empty file), then give it ``path`` as the store's meshes get theirs (:func:`geodata.store.publish`:
+    the first writer wins and the file is never rewritten). True when this call published."""
     tmp = path.with_name(f".{path.name}.{socket.gethostname()}.{os.getpid()}.tmp")
     with open(tmp, "wb") as f:
         f.write(data)
         f.flush()
         os.fsync(f.fileno())
-    try:
-        os.link(tmp, path)
-        return True
-    except FileExistsError:
-        return False
-    except OSError:  # a filesystem without hard links: a rename is atomic too (it may replace an equal copy)
-        if path.exists():
-            return False
-        os.replace(tmp, path)
-        return True
-    finally:
-        with contextlib.suppress(FileNotFoundError):
-            tmp.unlink()
+    return publish(tmp, path)
