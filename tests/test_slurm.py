@@ -237,10 +237,20 @@ def chain_with_stand_ins(tmp_path, queue, checks=(), shards=4):
 def recover(tmp_path, chain, rc=0, shell="bash"):
     calls = run("recover.sh", [chain], {}, tmp_path, shell=shell, rc=rc)
     return ([c for c in calls if c[0] == "geodata"], [c for c in calls if c[0] == "sbatch"],
-            [c for c in calls if c[0] == "scontrol"])
+            [c for c in calls if c[0] == "scontrol" and c[1] == "update"])
 
 
 BLOCKED = ["101 0 PENDING", "101 1 PENDING", "101 2 PENDING", "101 3 PENDING", "102 N/A PENDING"]
+
+
+def test_recover_leaves_a_dependency_that_is_already_right(tmp_path):
+    """Training already waits on the biharmonic array (SLURM shows it so): only the biharmonic array's
+    dependency is updated (SLURM 22.05 refused to update such a job unchanged on the test cluster)."""
+    chain = chain_with_stand_ins(tmp_path, BLOCKED, {("prepare", 1): 3})
+    (tmp_path / "show-102.txt").write_text("JobId=102 JobName=geo Dependency=afterok:101_*(unfulfilled) Nodes=2\n")
+    (tmp_path / "show-101.txt").write_text("JobId=101 JobName=bih Dependency=afterok:100_*(failed) Nodes=1\n")
+    _, _, scontrol = recover(tmp_path, chain)
+    assert scontrol == [["scontrol", "update", "JobId=101", "Dependency=afterok:103"]]
 
 
 @pytest.mark.parametrize("shell", SHELLS)

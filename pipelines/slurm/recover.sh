@@ -80,8 +80,21 @@ resubmit() {  # STAGE DEPENDENCY SHARD...: submit these shards of STAGE again; p
     echo "$job"
 }
 
+dependency_ids() {  # "afterok:55_*(unfulfilled):54_1" or "afterok:55:54_1" -> "54_1 55": the jobs waited on
+    grep -oE '[0-9]+(_[0-9]+)?' <<< "${1#*:}" | sort -u | paste -sd' ' || true
+}
+
 wait_on() {  # JOB DEPENDENCY: let the pending tasks of JOB wait on DEPENDENCY ("" releases them)
     if [ -n "$(awk -v job="$1" '$1 == job && $3 == "PENDING"' <<< "$queue")" ]; then
+        local now
+        now=$(scontrol -o show job "$1" 2>/dev/null | grep -oE 'Dependency=[^ ]+' | head -1 || true)
+        now=${now#Dependency=}; [ "$now" = "(null)" ] && now=""
+        # Already waiting on exactly these jobs: no update (SLURM 22.05 refused one such, "Requested partition
+        # configuration not available now", on a job it had accepted unchanged).
+        if [ -n "$2" ] && [ -n "$now" ] && [ "$(dependency_ids "$now")" = "$(dependency_ids "$2")" ]; then
+            echo "$1 waits on ${2#afterok:}"
+            return 0
+        fi
         # A busy controller may refuse for a moment ("Requested partition configuration not available now"
         # while a node does not respond): three tries, 5 s apart, then fail loudly.
         local try
