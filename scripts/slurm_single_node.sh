@@ -62,7 +62,7 @@ if ! command -v slurmctld >/dev/null || ! command -v munged >/dev/null; then
     exit 1
 fi
 host=$(hostname -s)
-cpus=$(nproc)
+cpus=$(nproc --all)  # the machine's: nproc alone follows OMP_NUM_THREADS, which a library may have set in the caller
 memory=$(( $(awk '/MemTotal/ {print $2}' /proc/meminfo) / 1024 - 1024 ))  # MiB, 1 GiB left to the system
 mkdir -p "$(dirname "$conf")" /etc/munge /var/log/munge /run/munge /var/lib/munge "$state/ctld" "$state/d" \
     /var/log/slurm-single

@@ -102,7 +102,7 @@ setpriv --reuid=munge --regid=munge --init-groups munged -F --socket="$state/mun
     --seed-file="$state/munge/seed" > "$state/munge/munged.out" 2>&1 &
 echo $! > "$state/munged.pid"
 
-cpus=$(nproc)
+cpus=$(nproc --all)  # the machine's: nproc alone follows OMP_NUM_THREADS, which a library may have set in the caller
 memory=$(( ($(awk '/MemTotal/ {print $2}' /proc/meminfo) / 1024 - 2048) / 2 ))  # MiB per node
 mkdir -p "$state/ctld" "$state/log" "$state/d-${nodes[0]}" "$state/d-${nodes[1]}"
 cat > "$state/slurm.conf" <<CONF
