@@ -12,6 +12,7 @@ from torch import Tensor, nn
 
 from geodata.mesh import Mesh, unique_edges, vertex_normals
 from geodata.stages.normalize import normalization
+from geodata.surface_points import locate_points
 
 from .checkpoint import load_checkpoint, save_checkpoint
 from .config import GeGnnConfig
@@ -21,7 +22,7 @@ from .graph import Graph, mesh_graph
 from .nn import GeoConv, GeoPool, GeoUnpool, Hierarchy, ResBlocks, build_hierarchy
 from .precision import resolve
 from .queries.embedding import Embedding
-from .queries.proxy import cloud_subset, cloud_weights, decimate, proxy_places, proxy_size
+from .queries.proxy import cloud_subset, cloud_weights, decimate, proxy_size
 from .threads import beside, fewer_for_torch
 
 __all__ = ["GeGnnConfig", "GeGnn", "DistanceDecoder", "LandmarkDecoder", "SpectralDecoder"]
@@ -162,7 +163,7 @@ class GeGnn(nn.Module):
                 return emb.blended(corners, weights, part=emb.part[corners[:, 0]])
             vertices, faces = _validated(vertices, faces)
             coarse = decimate(vertices, faces, target)
-            places = proxy_places(vertices, coarse)
+            places = locate_points(coarse, vertices)  # each vertex's closest point on the proxy
             return self._embed(coarse.vertices, coarse.faces, precision, None).at_points(
                 places.face, places.bary, vertices=vertices, faces=faces)
 

@@ -179,12 +179,13 @@ def prepare(raw_dir, out, pairs, target_vertices, collapse, seed, geodesic_backe
     except OSError as exc:  # a parent that is a file, no permission, a full disk...
         raise click.ClickException(f"{out}: cannot create the store: {exc.strerror or exc}") from None
     plan = plan_shard(raw_dir, out, shard, include, exclude)
+    pending_now = plan.pending()
     tasks = plan.pending(retry_failed)
     where = "" if shard == (0, 1) else f" (shard {shard[0]}/{shard[1]})"
     counts = (f"{len(plan.ledger['inputs'])} input files, {len(plan.tasks)} distinct, {len(plan.published)} "
-              f"published, {len(plan.failed - plan.published)} failed, {len(plan.pending())} pending{where}")
+              f"published, {len(plan.failed - plan.published)} failed, {len(pending_now)} pending{where}")
     if check:
-        _exit_check(f"prepare {raw_dir} -> {out}: {counts}", len(plan.pending()))
+        _exit_check(f"prepare {raw_dir} -> {out}: {counts}", len(pending_now))
     store.write_ledger(out, plan.ledger_name, plan.ledger)  # every input accounted for before any work
     log.info("prepare %s -> %s: %s; %d to do", raw_dir, out, counts, len(tasks))
     rows = _run(partial(process_task, out=out, config=config), tasks, "prepare", jobs, backend, scheduler)

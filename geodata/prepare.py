@@ -5,8 +5,8 @@ invariants between them and touches files and the store.
 """
 from __future__ import annotations
 
-import hashlib
 import contextlib
+import hashlib
 import importlib.metadata
 import json
 import os
@@ -91,13 +91,15 @@ ID_DIGITS = 32  # hex digits of the SHA-256 in a mesh id: 128 bits, no collision
 
 def mesh_id_of(source: str, digest: str) -> str:
     """``<safe stem>-<32 hex digits of the content hash>``: distinct files get distinct ids at any scale
-    (ShapeNet names every file model_normalized.obj), byte copies one id, in every run, shard and job count."""
+    (ShapeNet names every file model_normalized.obj), byte copies of one file name one id, in every run, shard
+    and job count (a byte copy under another name is a mesh of its own)."""
     stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(source).stem).strip("._") or "mesh"
     return f"{stem[:40]}-{digest[:ID_DIGITS]}"
 
 
 def make_tasks(raw_dir: str | Path, sources: list[str], known: dict | None = None) -> tuple[list[MeshTask], dict]:
-    """One task per distinct content among ``sources`` (byte copies are one task, under the first path), and the
+    """One task per distinct mesh id among ``sources`` (byte copies of one file name are one task, under the first
+    path), and the
     ledger entry of every source: {sha256, mesh_id, size, mtime_ns}. ``known``: an earlier ledger's entries,
     whose hash is reused where a file's size and modification time are unchanged (a rerun reads no file
     again). A file that cannot be read is a task with its reason in ``error``."""

@@ -10,10 +10,9 @@ from __future__ import annotations
 import numpy as np
 
 from geodata.mesh import Mesh
-from geodata.surface_points import SurfacePoints, locate_points
 
 __all__ = ["PROXY_ABOVE", "PROXY_VERTICES", "proxy_size", "decimate", "triangle_quality", "cloud_subset",
-           "cloud_weights", "proxy_places"]
+           "cloud_weights"]
 
 PROXY_ABOVE = 40_000  # meshes with more vertices are embedded through a proxy (docs/benchmarks.md)
 PROXY_VERTICES = 20_000  # the proxy's vertex count
@@ -47,7 +46,7 @@ def decimate(vertices: np.ndarray, faces: np.ndarray, target_vertices: int) -> M
     import fast_simplification
 
     from geodata.stages.remesh import isotropic_remesh
-    from geodata.stages.repair import meshlab_filter
+    from geodata.stages.repair import compact, meshlab_filter
 
     mesh = Mesh(np.asarray(vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64))
     goal = COARSE * target_vertices
@@ -55,8 +54,7 @@ def decimate(vertices: np.ndarray, faces: np.ndarray, target_vertices: int) -> M
         target_faces = max(4, int(round(goal * mesh.n_faces / mesh.n_vertices)))  # boundaries keep their ratio
         if np.mean(triangle_quality(mesh) < 0.1) <= SLIVERS:
             v, f = fast_simplification.simplify(mesh.vertices, mesh.faces.astype(np.int32), target_count=target_faces)
-            used, compact = np.unique(np.asarray(f, dtype=np.int64), return_inverse=True)
-            mesh = Mesh(np.asarray(v, dtype=np.float64)[used], compact.reshape(-1, 3))
+            mesh = compact(np.asarray(v, dtype=np.float64), np.asarray(f, dtype=np.int64))
         if mesh.n_faces > 1.5 * target_faces:
             mesh = meshlab_filter(mesh, "meshing_decimation_quadric_edge_collapse", targetfacenum=target_faces,
                                   preservetopology=False, qualitythr=0.3, autoclean=True)
@@ -92,7 +90,3 @@ def cloud_weights(points: np.ndarray, subset: np.ndarray) -> tuple[np.ndarray, n
     inv[exact] = (1.0, 0.0, 0.0)
     return idx, inv / inv.sum(axis=1, keepdims=True)
 
-
-def proxy_places(vertices: np.ndarray, proxy: Mesh) -> SurfacePoints:
-    """Each vertex's closest point on the proxy, as a face and barycentric coordinates (and its offset)."""
-    return locate_points(proxy, np.asarray(vertices, dtype=np.float64))
