@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 
 import pytest
+from slurmtools import running_cluster
 
 ROOT = Path(__file__).resolve().parents[1]
 SLURM = ROOT / "pipelines" / "slurm"
@@ -21,22 +22,9 @@ SITE = ["--cpus-per-task=1", "--mem=1500M"]  # the site's resource flags: this n
 
 @pytest.fixture(scope="module")
 def cluster():
-    why = None
-    path = f"{os.environ.get('PATH', '')}:/usr/sbin:/sbin"  # the daemons live in sbin
-    script = str(ROOT / "scripts" / "slurm_single_node.sh")
-    if not shutil.which("slurmctld", path=path) or not shutil.which("munged", path=path):
-        why = "slurm-wlm and munge are not installed (apt-get install slurm-wlm munge)"
-    elif os.geteuid() != 0:
-        why = "starting SLURM's daemons needs root"
-    else:
-        start = subprocess.run([script, "start"], capture_output=True, text=True)
-        why = None if start.returncode == 0 else f"SLURM did not start: {start.stderr.strip()}"
-    if why:
-        if os.environ.get("CI") == "true":
-            pytest.fail(why)
-        pytest.skip(why)
-    yield
-    subprocess.run([script, "stop"], check=True)
+    yield from running_cluster("slurm_single_node.sh", ("slurmctld", "munged"),
+                               "slurm-wlm and munge are not installed (apt-get install slurm-wlm munge)",
+                               "starting SLURM's daemons needs root", "SLURM")
 
 
 def _env(tmp_path):

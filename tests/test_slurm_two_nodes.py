@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 import pytest
+from slurmtools import running_cluster
 
 ROOT = Path(__file__).resolve().parents[1]
 SLURM = ROOT / "pipelines" / "slurm"
@@ -23,22 +24,9 @@ pytestmark = pytest.mark.slow
 
 @pytest.fixture(scope="module")
 def cluster():
-    script = str(ROOT / "scripts" / "slurm_two_nodes.sh")
-    path = f"{os.environ.get('PATH', '')}:/usr/sbin:/sbin"
-    why = None
-    if not all(shutil.which(t, path=path) for t in ("slurmctld", "slurmd", "munged", "ip", "nsenter")):
-        why = "slurm-wlm, munge or iproute2 are not installed"
-    elif os.geteuid() != 0:
-        why = "network namespaces and SLURM's daemons need root"
-    else:
-        start = subprocess.run([script, "start"], capture_output=True, text=True)
-        why = None if start.returncode == 0 else f"the two-node SLURM did not start: {start.stderr.strip()}"
-    if why:
-        if os.environ.get("CI") == "true":
-            pytest.fail(why)
-        pytest.skip(why)
-    yield
-    subprocess.run([script, "stop"], check=True)
+    yield from running_cluster("slurm_two_nodes.sh", ("slurmctld", "slurmd", "munged", "ip", "nsenter"),
+                               "slurm-wlm, munge or iproute2 are not installed",
+                               "network namespaces and SLURM's daemons need root", "the two-node SLURM")
 
 
 def _env(tmp_path):
