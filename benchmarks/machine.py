@@ -21,5 +21,7 @@ def cpu_description() -> str:
            "AVX512-BF16": torch.cpu._is_avx512_bf16_supported(), "AMX": torch.cpu._is_amx_tile_supported()}
     flags = ", ".join(name if present else f"no {name}" for name, present in isa.items())
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    from gegnn.decoders import compiled_isa
+
     return (f"{model}, {cores} cores ({flags}); precision fp32 unless a row says otherwise "
-            f"(auto: {resolve('auto', 'cpu')} here)")
+            f"(auto: {resolve('auto', 'cpu')} here); compiled decode: {compiled_isa()}")

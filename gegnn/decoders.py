@@ -3,7 +3,8 @@ r"""Pair decoders: per-vertex codes of two vertices to their distance.
 Every decoder splits into ``inputs`` (the symmetric pair features and what the output needs) and
 ``output`` (the MLP's value to a distance), so :class:`gegnn.queries.embedding.Embedding` can run the MLP in its
 own fast path between the two; ``pair_inputs`` is ``inputs`` of pairs of rows of a code table (fused into
-one pass for the landmark decoder on a CPU).
+one pass for the landmark decoder on a CPU). On a CPU in fp32, the distance and landmark decoders also run
+whole, features and MLP, in one compiled pass (:meth:`PairDecoder.fused_decode`, ``src/pair_features.cpp``).
 """
 from __future__ import annotations
 
@@ -15,9 +16,11 @@ from torch import Tensor, nn
 from .fields.spectral import weyl_shape, weyl_table
 from .nn import cpu_inference
 
-__all__ = ["PairDecoder", "DistanceDecoder", "LandmarkDecoder", "SpectralDecoder", "MLP", "mlp"]
+__all__ = ["compiled_isa", "PairDecoder", "DistanceDecoder", "LandmarkDecoder", "SpectralDecoder", "MLP", "mlp"]
 
 MAX_LOG_RATIO = 5.0  # a ratio decoder never predicts more than e^5 = 148 times the lower bound
+ISA = "auto"  # the compiled decode's instruction set: "auto" (the widest this CPU has), "avx512", "avx2", or "none"
+FUSED_COLUMNS = 32  # the compiled decode takes hidden layers whose widths are multiples of this
 
 
 class MLP(nn.Sequential):
@@ -43,6 +46,15 @@ def mlp(n_in: int, hidden: int, zero_last: bool = False) -> MLP:
     return m
 
 
+def compiled_isa() -> str:
+    """The instruction set of the compiled decode here: :data:`ISA`, where ``"auto"`` is the widest this CPU
+    runs (``"avx512"``, ``"avx2"`` with FMA, or ``"none"``: torch's path, faster than the kernels without
+    FMA). Tests and benchmarks set :data:`ISA` to force each."""
+    from ._pair_features import cpu_isa
+
+    return cpu_isa() if ISA == "auto" else ISA
+
+
 class PairDecoder(nn.Module):
     """What every decoder shares: :meth:`pair_inputs`, and ``forward`` = ``output(mlp(inputs))``."""
 
@@ -58,6 +70,34 @@ class PairDecoder(nn.Module):
     def pair_width(self, codes: Tensor) -> int:
         """Values one pair holds in flight in :meth:`pair_inputs` (sets the chunk of a decode)."""
         return 2 * codes.shape[1]
+
+    def fused_layout(self) -> tuple | None:
+        """The compiled decode's description of this decoder's inputs, ``(mode, D, K, embedding,
+        euclidean)`` (``src/pair_features.cpp``), or None where it has none."""
+        return None
+
+    def fuses(self, codes: Tensor, layers) -> bool:
+        """Whether :meth:`fused_decode` runs on these codes and MLP layers: a CPU with AVX2 or AVX512
+        (:func:`compiled_isa`), fp32, no gradients, hidden widths that are multiples of :data:`FUSED_COLUMNS`."""
+        return (self.fused_layout() is not None and cpu_inference(codes) and compiled_isa() != "none"
+                and len(layers) >= 2
+                and all(w.dtype == torch.float32 for w, _ in layers)
+                and all(w.shape[1] % FUSED_COLUMNS == 0 for w, _ in layers[:-1]))
+
+    def fused_decode(self, codes: Tensor, i: Tensor, j: Tensor, layers) -> Tensor:
+        """``output(mlp(pair_inputs(codes, i, j)))`` in one compiled pass, where :meth:`fuses`: features and
+        MLP a tile of 64 pairs at a time, held in cache, on all of torch's threads. ``layers``: the MLP's
+        ``(weight.t(), bias)`` pairs in fp32. Equal to the torch path to within float rounding."""
+        from ._pair_features import decode_pairs
+
+        mode, d, k, embedding, euclidean = self.fused_layout()
+        n = len(i)
+        t = torch.empty(n)
+        lower, upper = (torch.empty(n), torch.empty(n)) if mode == 1 else (torch.empty(0), torch.empty(0))
+        decode_pairs(codes.contiguous(), i.contiguous(), j.contiguous(), mode, d, k, embedding, euclidean,
+                     [w.contiguous() for w, _ in layers], [b.contiguous() for _, b in layers], t, lower, upper,
+                     torch.get_num_threads(), compiled_isa())
+        return self.output(t.unsqueeze(1), (lower, upper) if mode == 1 else None)
 
     def point_codes(self, corners: Tensor, bary: Tensor) -> Tensor:
         r"""Codes (P, C) of points inside faces from their corners' codes (P, 3, C) and barycentric
@@ -87,6 +127,9 @@ class DistanceDecoder(PairDecoder):
 
     def output(self, t: Tensor, extra=None) -> Tensor:
         return t.squeeze(1).abs()
+
+    def fused_layout(self) -> tuple | None:
+        return (0, 0, 0, False, False) if self.mlp is not None else None
 
     def forward(self, a: Tensor, b: Tensor) -> Tensor:
         if self.mlp is None:
@@ -183,6 +226,9 @@ class LandmarkDecoder(PairDecoder):
 
     def pair_width(self, codes: Tensor) -> int:
         return self.mlp[0].in_features if cpu_inference(codes) else super().pair_width(codes)
+
+    def fused_layout(self) -> tuple | None:
+        return 1, self.embed_dim, self.k, self.embedding, self.euclidean
 
     def point_codes(self, corners: Tensor, bary: Tensor) -> Tensor:
         """The blend of the corners' codes, except the distance to the nearest landmark, which is that of

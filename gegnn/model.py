@@ -130,9 +130,10 @@ class GeGnn(nn.Module):
         their codes; its ``part`` labels the parts of its neighbour graph). ``device`` (default: where the
         model is) moves the model there, as ``model.to(device)`` would, and the embedding lives there.
         ``precision`` governs the network and the returned embedding's decoder alike: ``"fp32"`` (the
-        default), ``"bf16"`` (the network under bf16 autocast, the decoder's hidden layers in bf16: 1.6x
-        faster on a CPU with AVX512-BF16, embeddings within ~1% (relative norm) of fp32), or ``"auto"``:
-        bf16 only where the hardware has native bf16 (:mod:`gegnn.precision`). A mesh of more than
+        default), ``"bf16"`` (the network under bf16 autocast, the decoder's hidden layers in bf16: the
+        network 1.6x faster on a CPU with AVX512-BF16, embeddings within ~1% (relative norm) of fp32), or
+        ``"auto"``: bf16 only where the hardware has native bf16 (:mod:`gegnn.precision`), except for a
+        decoder with a compiled fp32 decode on a CPU, which is faster (:func:`gegnn.precision.resolve_decoder`). A mesh of more than
         ``PROXY_ABOVE`` (40,000) vertices is embedded through a proxy of the same surface with ``PROXY_VERTICES``
         (20,000) (``proxy``: ``"auto"``, another vertex count, or None for the mesh itself;
         :mod:`gegnn.queries.proxy`): the network and fields run at the resolution the model knows, every vertex
@@ -146,28 +147,31 @@ class GeGnn(nn.Module):
         Returns:
             :class:`gegnn.queries.embedding.Embedding`
         """
-        # resolved for the device the model will run on; an unknown precision fails before any work
-        precision = resolve(precision, next(self.parameters()).device if device is None else device)
+        # resolved for the device the model will run on; an unknown precision fails before any work. The
+        # embedding's decoder resolves the request itself (a compiled fp32 decode may beat bf16).
+        requested, precision = precision, resolve(precision, next(self.parameters()).device if device is None else device)
         if device is not None:  # outside inference mode: moved parameters stay trainable
             self.to(device)
         with torch.inference_mode():
             target = proxy_size(len(vertices), proxy)
             if target is None:
-                return self._embed(vertices, faces, precision, normals)
+                return self._embed(vertices, faces, precision, normals, requested)
             if self.config.points:  # a cloud: a subset embedded, each point blended from its 3 nearest there
                 points = np.asarray(vertices, dtype=np.float64)
                 subset = cloud_subset(points, target)
                 emb = self._embed(points[subset], faces, precision, None if normals is None else
-                                  np.asarray(normals)[subset])
+                                  np.asarray(normals)[subset], requested)
                 corners, weights = cloud_weights(points, subset)
                 return emb.blended(corners, weights, part=emb.part[corners[:, 0]])
             vertices, faces = _validated(vertices, faces)
             coarse = decimate(vertices, faces, target)
             places = locate_points(coarse, vertices)  # each vertex's closest point on the proxy
-            return self._embed(coarse.vertices, coarse.faces, precision, None).at_points(
+            return self._embed(coarse.vertices, coarse.faces, precision, None, requested).at_points(
                 places.face, places.bary, vertices=vertices, faces=faces)
 
-    def _embed(self, vertices, faces, precision, normals):
+    def _embed(self, vertices, faces, precision, normals, requested):
+        """One forward pass with the network in ``precision`` ("fp32" or "bf16"); the embedding's decoder
+        gets the ``requested`` precision to resolve."""
         device = next(self.parameters()).device
         if self.config.points:
             if faces is not None:
@@ -198,7 +202,7 @@ class GeGnn(nn.Module):
         self.train(was_training)
         if expand is not None:
             codes = codes[torch.as_tensor(expand, device=device)]
-        return Embedding(codes, self.distance, scale, precision, vertices=vertices, faces=faces, part=part)
+        return Embedding(codes, self.distance, scale, requested, vertices=vertices, faces=faces, part=part)
 
     def inputs(self, vertices: np.ndarray, faces: np.ndarray, device) -> tuple[Callable, Callable, float]:
         """What the network reads for one mesh in any units, as two functions that :meth:`embed` runs side

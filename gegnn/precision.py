@@ -34,3 +34,11 @@ def resolve(precision: str, device) -> str:
     if precision == "auto":
         return "bf16" if native_bf16(device) else "fp32"
     return precision
+
+
+def resolve_decoder(precision: str, device, compiled: bool) -> str:
+    """The decoder's precision: :func:`resolve`, except that ``"auto"`` stays ``"fp32"`` on a CPU where the
+    decoder has a ``compiled`` fp32 decode."""
+    if precision == "auto" and compiled and torch.device(device).type == "cpu":
+        return "fp32"
+    return resolve(precision, device)

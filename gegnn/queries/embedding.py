@@ -11,6 +11,7 @@ __all__ = ["Embedding"]
 
 CHUNK_VALUES = 1 << 20  # values a decoded chunk holds in flight on a CPU: intermediates stay in cache
 ACCELERATOR_CHUNK_VALUES = 1 << 27  # ... on a GPU: few launches (512 MB of fp32 codes)
+FUSED_CHUNK = 1 << 22  # pairs per call of the compiled decode on a CPU: 16 bytes a pair in flight (64 MiB)
 SURFACE_CHUNK = 4096  # pairs of distinct surface points blended at once on a CPU (6 code rows a pair)
 ACCELERATOR_SURFACE_CHUNK = 1 << 16  # ... on a GPU: 1M pairs in 16 rounds (~0.3 GB of blended codes in flight)
 
@@ -26,14 +27,17 @@ class Embedding:
         decoder: the model's :class:`gegnn.decoders.DistanceDecoder` or ``LandmarkDecoder``.
         scale: factor from normalized units to the input's units.
         precision: the decoder's hidden layers in ``"fp32"`` (the default), ``"bf16"``, or ``"auto"``:
-            bf16 only where the hardware has native bf16 (:mod:`gegnn.precision`). bf16 changes
-            distances by ~0.3% relative (median), below the model's error.
-        chunk: pairs decoded per batch. On a CPU about 1M values in flight (the decoder's
-            ``pair_width`` a pair: 8192 pairs of two 64-d embeddings, 14768 pairs of the landmark
-            decoder's 71 fused inputs): large enough for the matmul kernels, small enough that
-            intermediates stay in cache (landmark model, 1M queries: 0.25 s against 0.31 s with 7384
-            and 0.27 s with 16384). On a GPU 128M values (342k pairs of 196-d codes): 1M queries in 3
-            chunks, where the CPU's size would launch thousands of kernels.
+            bf16 only where the hardware has native bf16 and no compiled fp32 decode is faster
+            (:func:`gegnn.precision.resolve_decoder`). bf16 changes distances by ~0.3% relative (median),
+            below the model's error.
+        chunk: pairs decoded per batch. For the compiled decode on a CPU
+            (:meth:`gegnn.decoders.PairDecoder.fused_decode`, which works through its pairs in tiles of 64
+            held in cache) 4M pairs, 16 bytes each in flight: each call starts threads, which wait for torch's
+            (1M landmark queries: 0.14 s in one call, 0.17 s in chunks of 262k, 0.28 s in chunks of 16k).
+            Else about 1M values in flight, the decoder's ``pair_width`` a pair (8192 pairs of two 64-d
+            embeddings, 14768 of the landmark decoder's 71 inputs): large enough for the matmul kernels,
+            small enough that intermediates stay in cache. On a GPU 128M values (342k pairs of 196-d
+            codes): 1M queries in 3 chunks, where the CPU's size would launch thousands of kernels.
         vertices: the embedded mesh's vertices in its own units (:meth:`gegnn.GeGnn.embed` passes them
             and ``faces``): needed by the geometric queries, :meth:`path` and :meth:`log_map`.
         faces: the embedded mesh's faces.
@@ -51,12 +55,13 @@ class Embedding:
         self._topology = None
         self.decoder, self.scale = decoder, float(scale)
         on_cpu = self.features.device.type == "cpu"
-        values = CHUNK_VALUES if on_cpu else ACCELERATOR_CHUNK_VALUES
-        self.chunk = chunk or max(1024, values // decoder.pair_width(self.features))
         self.surface_chunk = SURFACE_CHUNK if on_cpu else ACCELERATOR_SURFACE_CHUNK
-        self.precision = _precision.resolve(precision, self.features.device)
+        self.precision = _precision.resolve_decoder(precision, self.features.device, decoder.fused_layout() is not None)
         self.dtype = _precision.DTYPES[self.precision]
         self._layers = self._decoder_layers()
+        self._fused = self._layers is not None and decoder.fuses(self.features, self._layers)
+        values = CHUNK_VALUES if on_cpu else ACCELERATOR_CHUNK_VALUES
+        self.chunk = chunk or (FUSED_CHUNK if self._fused else max(1024, values // decoder.pair_width(self.features)))
 
     @property
     def num_vertices(self) -> int:
@@ -299,6 +304,8 @@ class Embedding:
         """Distances of the pairs (codes[i], codes[j]) (normalized units, diagonal not zeroed)."""
         if self._layers is None:  # Euclidean decoder: no MLP, fp32 is cheap
             return (codes.index_select(0, i) - codes.index_select(0, j)).norm(dim=1)
+        if self._fused:  # features and MLP in one compiled pass, tile by tile
+            return self.decoder.fused_decode(codes, i, j, self._layers)
         x, extra = self.decoder.pair_inputs(codes, i, j)
         x = x.to(self.dtype)
         *hidden, (w_out, b_out) = self._layers

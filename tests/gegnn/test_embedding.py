@@ -5,8 +5,8 @@ import pytest
 import torch
 from gegnn_stores import ellipsoid, small_config
 
-from gegnn import GeGnn
-from gegnn.decoders import LandmarkDecoder
+from gegnn import GeGnn, decoders
+from gegnn.decoders import DistanceDecoder, LandmarkDecoder
 from gegnn.queries.embedding import Embedding
 
 
@@ -57,6 +57,64 @@ def test_fused_decoder_distances_equal_the_module():
     ref = dec(codes[i], codes[j]).detach().numpy() * 2.0
     ref[i == j] = 0
     np.testing.assert_allclose(emb.distance(i, j), ref, rtol=1e-5, atol=1e-7)
+
+
+ISAS = ["none", "avx2", "avx512"]  # narrowest first, as src/dense.h orders them
+
+
+def decoders_with_mlps():
+    """The decoders the compiled decode takes, with MLPs whose every layer matters (none zero)."""
+    torch.manual_seed(3)
+    made = [LandmarkDecoder(8, 21, 64), LandmarkDecoder(8, 130, 32, embedding=False, output="interval"),
+            LandmarkDecoder(8, 21, 64, euclidean=False), DistanceDecoder(29, 96)]
+    for dec in made:
+        for layer in dec.mlp[::2]:
+            torch.nn.init.normal_(layer.weight, std=0.4)
+            torch.nn.init.normal_(layer.bias, std=0.1)
+    return made
+
+
+@pytest.mark.parametrize("isa", ISAS)
+@pytest.mark.parametrize("which", range(4))
+def test_compiled_decode_equals_the_torch_module_on_each_instruction_set(isa, which, monkeypatch):
+    """Embedding.distance with the compiled decode (features + MLP, tile by tile) forced onto each instruction
+    set equals the decoder module run by torch, to float rounding: 5003 pairs (tiles of 64 and a part tile,
+    split over 3 threads), landmark layouts with K not a multiple of the vector width, the interval output,
+    the paper's decoder. "none" (a CPU without AVX2) takes torch's path; an instruction set the CPU lacks is
+    refused by name, never run."""
+    from gegnn._pair_features import cpu_isa
+
+    dec = decoders_with_mlps()[which]
+    codes = landmark_codes(n=400, k=dec.k) if isinstance(dec, LandmarkDecoder) else torch.randn(400, 29)
+    rng = np.random.default_rng(which)
+    i, j = rng.integers(0, len(codes), 5003), rng.integers(0, len(codes), 5003)
+    with torch.inference_mode():
+        ref = dec(codes[i], codes[j]).numpy()
+    ref[i == j] = 0
+    monkeypatch.setattr(decoders, "ISA", isa)
+    emb = Embedding(codes, dec, precision="fp32")
+    assert emb._fused == (isa != "none")
+    if ISAS.index(isa) > ISAS.index(cpu_isa()):
+        with pytest.raises(ValueError, match=f"'{isa}' is not one this CPU runs"):
+            emb.distance(i, j)
+        return
+    monkeypatch.setattr(torch, "get_num_threads", lambda: 3)
+    out = emb.distance(i, j)
+    assert out.shape == ref.shape and (ref > 0).mean() > 0.9
+    # t up to ~5 (its rounding, times exp(t)); |t| near 0 (the paper's decoder): rounding of sums of large terms
+    np.testing.assert_allclose(out, ref, rtol=1e-4, atol=1e-6 * np.abs(ref).max())
+
+
+def test_decode_takes_the_torch_path_where_the_compiled_one_does_not_apply():
+    """bf16, a hidden width that is not a multiple of 32, or codes that carry gradients: no compiled decode."""
+    codes = landmark_codes()
+    assert Embedding(codes, LandmarkDecoder(8, 21, 64), precision="fp32")._fused
+    assert not Embedding(codes, LandmarkDecoder(8, 21, 48), precision="fp32")._fused
+    assert not Embedding(codes, LandmarkDecoder(8, 21, 64), precision="bf16")._fused
+    dec = LandmarkDecoder(8, 21, 64)
+    layers = Embedding(codes, dec)._layers
+    with torch.enable_grad():
+        assert not dec.fuses(codes.clone().requires_grad_(True), layers)
 
 
 @pytest.fixture(scope="module")

@@ -93,17 +93,21 @@ def test_deterministic_mode_sets_the_cublas_workspace_wherever_it_is_turned_on(m
 
 
 def test_chunks_are_sized_by_the_device_the_codes_are_on():
-    """On a CPU, chunks that keep intermediates in cache; elsewhere (here the meta device stands for a GPU)
-    large ones, for pairs and for surface points alike: few launches."""
+    """On a CPU, chunks that keep intermediates in cache (the torch path's features), or few calls of the
+    compiled decode, which keeps its own in cache; elsewhere (here the meta device stands for a GPU) large ones, for pairs and for
+    surface points alike: few launches."""
     import gegnn.queries.embedding as gemb
 
-    decoder = LandmarkDecoder(16, 4, 32)
-    cpu = gemb.Embedding(torch.zeros(10, 16 + 4 + 3), decoder)
-    gpu = gemb.Embedding(torch.zeros(10, 16 + 4 + 3, device="meta"), decoder)
-    assert cpu.chunk == max(1024, gemb.CHUNK_VALUES // decoder.pair_width(cpu.features))
+    decoder, unfused = LandmarkDecoder(16, 4, 32), LandmarkDecoder(16, 4, 48)
+    cpu = gemb.Embedding(torch.zeros(10, 16 + 4 + 4), decoder)
+    torch_path = gemb.Embedding(torch.zeros(10, 16 + 4 + 4), unfused)
+    gpu = gemb.Embedding(torch.zeros(10, 16 + 4 + 4, device="meta"), decoder)
+    assert cpu._fused and not torch_path._fused and not gpu._fused
+    assert cpu.chunk == gemb.FUSED_CHUNK
+    assert torch_path.chunk == max(1024, gemb.CHUNK_VALUES // unfused.pair_width(torch_path.features))
     assert gpu.chunk == gemb.ACCELERATOR_CHUNK_VALUES // decoder.pair_width(gpu.features)
     assert cpu.surface_chunk == gemb.SURFACE_CHUNK and gpu.surface_chunk == gemb.ACCELERATOR_SURFACE_CHUNK
-    assert gpu.chunk > 50 * cpu.chunk and gpu.surface_chunk >= 16 * cpu.surface_chunk
+    assert gpu.chunk > 50 * torch_path.chunk and gpu.surface_chunk >= 16 * cpu.surface_chunk
 
 
 def test_indices_are_copied_asynchronously_only_towards_an_accelerator(monkeypatch):
