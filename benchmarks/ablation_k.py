@@ -1,6 +1,6 @@
 """Landmark count K of the landmark-guided GeGnn: accuracy and cost of each model, measured in one run.
 
-    python benchmarks/ablation_k.py VAL_STORE [NAME=CHECKPOINT[@K] ...] [--mesh ID]
+    python benchmarks/ablation_k.py VAL_STORE [NAME=CHECKPOINT[@K] ...] [--mesh ID] [--fps-batch B ...]
 
 NAME=CHECKPOINT is a model to compare (``shipped`` for ``GeGnn.pretrained()``); ``@K`` runs it with K
 landmark fields at embed time instead of the K it was trained with (the decoder's weights do not
@@ -10,6 +10,8 @@ depend on K). Default: the shipped model at K = 128, 256, 512 and 1024. For each
   - on the mesh --mesh (default dragon-4af53808, 5,224 vertices): embed (landmark fields + one forward
     pass, fp32) and 1M random queries, best of 3, and their sum against the heat method for the same
     1M pairs (potpourri3d, one field per distinct source, measured once in this run).
+--fps-batch runs every model once per B: landmarks chosen B a round (gegnn.fields.landmarks.FPS_BATCH;
+1 is sequential farthest-point sampling).
 Prints a markdown table (for docs/results.md) with the CPU.
 """
 from __future__ import annotations
@@ -21,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from gegnn import GeGnn
+from gegnn.fields import landmarks
 from gegnn.training.loop import evaluate_store
 from geodata import store as geostore
 
@@ -49,6 +52,8 @@ def main():
     ap.add_argument("models", nargs="*", default=[f"shipped@{k}" for k in (128, 256, 512, 1024)])
     ap.add_argument("--mesh", default="dragon-4af53808", help="a mesh id of the store, or a unique prefix of one")
     ap.add_argument("--out", help="also write the table to this file (for bench_results.py --landmarks-table)")
+    ap.add_argument("--fps-batch", type=int, nargs="+", default=[landmarks.FPS_BATCH],
+                    help="landmarks chosen a round, each a row (default: gegnn.fields.landmarks.FPS_BATCH)")
     args = ap.parse_args()
     print(f"CPU: {cpu_description()}", flush=True)
     args.mesh = mesh_id(args.store, args.mesh)
@@ -58,17 +63,19 @@ def main():
     i, j = rng.integers(0, len(v), 1_000_000), rng.integers(0, len(v), 1_000_000)
     heat = timed(lambda: heat_pairs(v, f, i, j), repeat=1)[0]
     print(f"heat method, 1M pairs on {args.mesh} ({len(v):,} vertices): {heat:.2f} s", flush=True)
-    lines = ["| model | K | validation MRE | embed (s) | 1M queries (s) | embed + 1M | vs heat method |",
-             "|---|---:|---:|---:|---:|---:|---:|"]
+    lines = ["| model | K | landmarks a round | validation MRE | embed (s) | 1M queries (s) | embed + 1M | vs heat method |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|"]
     for spec in args.models:
         name, model = load_model(spec)
-        rows = evaluate_store(model, args.store)
-        mre = float(np.mean([r["mre"] for r in rows]))
-        embed, emb = timed(lambda: model.embed(v, f))
-        query = timed(lambda: emb.distance(i, j))[0]
-        lines.append(f"| {name} | {model.config.landmarks} | {100 * mre:.3f}% | {embed:.3f} | {query:.3f} | "
-                     f"{embed + query:.3f} | {heat / (embed + query):.1f}x |")
-        print(lines[-1], flush=True)
+        for batch in args.fps_batch:
+            landmarks.FPS_BATCH = batch
+            rows = evaluate_store(model, args.store)
+            mre = float(np.mean([r["mre"] for r in rows]))
+            embed, emb = timed(lambda: model.embed(v, f))
+            query = timed(lambda: emb.distance(i, j))[0]
+            lines.append(f"| {name} | {model.config.landmarks} | {batch} | {100 * mre:.3f}% | {embed:.3f} | "
+                         f"{query:.3f} | {embed + query:.3f} | {heat / (embed + query):.1f}x |")
+            print(lines[-1], flush=True)
     print("\n" + "\n".join(lines))
     if args.out:
         Path(args.out).write_text(f"CPU: {cpu_description()}; heat method for the 1M pairs: {heat:.2f} s.\n\n"

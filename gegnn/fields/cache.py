@@ -14,7 +14,8 @@ of NumPy files, one a (fields, mesh, draw), read back per sample (a few millisec
     CACHE/format.json                          {"gegnn_field_cache": 2}
     CACHE/<spec>/<key[:2]>/<key>-<seed>.npy    float16 (N, K) landmark fields, float32 (N, m + 1) codes
 
-``<spec>`` is ``k<K>`` for landmark fields and ``spectral<m>`` for spectral codes. ``key`` is a hash of
+``<spec>`` (:attr:`FieldSpec.name`) is ``k<K>-rounds16`` for a mesh's landmark fields, ``k<K>-cloud<k>-surface2``
+for a point cloud's and ``spectral<m>`` for spectral codes. ``key`` is a hash of
 the mesh's vertices and faces, not its id: an id names the raw file, and two stores made from one file
 with other settings hold other meshes. So one cache can serve several runs and stores
 (``gegnn train --field-cache DIR``), and a killed fill loses only the fields in flight.
@@ -46,7 +47,7 @@ from pathlib import Path
 import numpy as np
 from geodata.store import publish
 
-from .landmarks import landmark_solver
+from .landmarks import FPS_BATCH, landmark_solver
 from .spectral import spectral_codes
 
 __all__ = ["FieldSpec", "FieldCache", "estimate_fill", "readable", "LANDMARK_DRAWS"]
@@ -94,8 +95,11 @@ class FieldSpec:
         if self.kind == "spectral":
             return f"spectral{self.size}"
         # "-surface2": point-cloud fields on surface_neighbors with twice-fitted cone normals (since
-        # 2026-11-23, the second cloud release): not those of older caches
-        return f"k{self.size}" + (f"-cloud{self.cloud}-surface2" if self.cloud else "")
+        # 2026-11-23, the second cloud release); "-rounds16": a mesh's landmarks chosen 16 a round (since
+        # 2026-11-26, gegnn.fields.landmarks.FPS_BATCH): not those of older caches
+        if self.cloud:
+            return f"k{self.size}-cloud{self.cloud}-surface2"
+        return f"k{self.size}" + (f"-rounds{FPS_BATCH}" if FPS_BATCH > 1 else "")
 
     def compute(self, vertices: np.ndarray, faces: np.ndarray, seed: int = 0) -> np.ndarray:
         """The fields of one mesh, float32 (N, K) or (N, m + 1); for a point-cloud model, of its vertices as

@@ -38,7 +38,8 @@ from geodata.mesh import Mesh, label_groups, vertex_components
 
 from .heat import HeatDistance
 
-__all__ = ["LandmarkFields", "landmark_fields", "landmark_solver", "farthest_point_fields", "graph_farthest_points",
+__all__ = ["LandmarkFields", "landmark_fields", "landmark_solver", "farthest_point_fields",
+           "batched_farthest_point_fields", "graph_farthest_points",
            "landmark_columns", "T_COEF", "MODEL_STEP_UP_TO"]
 
 # Landmark fields keep the heat step the models were trained with (t_coef hbar^2) up to here: the model reads
@@ -49,6 +50,7 @@ __all__ = ["LandmarkFields", "landmark_fields", "landmark_solver", "farthest_poi
 MODEL_STEP_UP_TO = 100_000
 
 T_COEF = 0.5
+FPS_BATCH = 16  # landmarks chosen a round, their fields in one solve (module docstring: the ablation)
 TIE = 1e-9  # farthest-point ties: relative to the largest distance
 HEAT_MIN_VERTICES = 500  # below, or for fewer fields, potpourri3d's own solver is faster (its setup is)
 HEAT_MIN_FIELDS = 32
@@ -75,7 +77,8 @@ class LandmarkFields:
         return self.distances.shape[1]
 
 
-def landmark_fields(vertices, faces, k: int, seed: int = 0, t_coef: float = T_COEF) -> LandmarkFields:
+def landmark_fields(vertices, faces, k: int, seed: int = 0, t_coef: float = T_COEF, batch: int | None = None
+                    ) -> LandmarkFields:
     """K geodesic farthest-point landmarks per component and their heat-method distance fields.
 
     Deterministic for a given mesh, ``k`` and ``seed`` (the seed picks each component's first
@@ -90,11 +93,14 @@ def landmark_fields(vertices, faces, k: int, seed: int = 0, t_coef: float = T_CO
         k: landmarks per component (>= 1).
         seed: choice of the first landmark of every component.
         t_coef: heat-method time step (potpourri3d ``t_coef``).
+        batch: landmarks chosen a round (:func:`batched_farthest_point_fields`; 1: sequential sampling;
+            default FPS_BATCH).
     """
-    return landmark_solver(vertices, faces, k, t_coef)(seed)
+    return landmark_solver(vertices, faces, k, t_coef, batch)(seed)
 
 
-def landmark_solver(vertices, faces, k: int, t_coef: float = T_COEF) -> Callable[[int], LandmarkFields]:
+def landmark_solver(vertices, faces, k: int, t_coef: float = T_COEF, batch: int | None = None
+                    ) -> Callable[[int], LandmarkFields]:
     """``seed -> LandmarkFields``: :func:`landmark_fields` of one mesh for any seed, each component's heat
     method set up once (on the first call) and sampled for every seed."""
     if k < 1:
@@ -125,7 +131,8 @@ def landmark_solver(vertices, faces, k: int, t_coef: float = T_COEF) -> Callable
             n_fields = min(k, len(idx))
             if c not in solvers:
                 solvers[c] = _heat_field(mesh.vertices[idx], sub_faces, t_coef, n_fields)
-            chosen, sampled = farthest_point_fields(solvers[c], len(idx), n_fields, int(rng.integers(len(idx))))
+            chosen, sampled = batched_farthest_point_fields(solvers[c], mesh.vertices[idx], n_fields,
+                                                            int(rng.integers(len(idx))), batch or FPS_BATCH)
             cols = np.arange(k) % len(chosen)  # fewer vertices than K: repeat
             out[idx] = sampled[:, cols]
             landmarks[c] = idx[np.asarray(chosen)[cols]]
@@ -134,35 +141,59 @@ def landmark_solver(vertices, faces, k: int, t_coef: float = T_COEF) -> Callable
 
 
 def _heat_field(vertices, faces, t_coef: float, fields: int):
-    """``field(source) -> (N,)``: potpourri3d's robust heat method, by :class:`gegnn.fields.heat.HeatDistance`
+    """``fields(sources) -> (N, len(sources))``: potpourri3d's robust heat method, by :class:`gegnn.fields.heat.HeatDistance`
     where that pays (see the module), by potpourri3d itself elsewhere and on meshes that HeatDistance does
     not cover (:func:`gegnn.fields.heat.cover_problem`). Beyond MODEL_STEP_UP_TO vertices always HeatDistance,
     whose time step then grows with the resolution (:func:`gegnn.fields.heat.time_step`); up to there the
     step the shipped models were trained with."""
     if len(vertices) > MODEL_STEP_UP_TO or (len(vertices) >= HEAT_MIN_VERTICES and fields >= HEAT_MIN_FIELDS):
         try:
-            return HeatDistance(vertices, faces, t_coef, same_up_to=MODEL_STEP_UP_TO).distance
+            return HeatDistance(vertices, faces, t_coef, same_up_to=MODEL_STEP_UP_TO).distances
         except ValueError:
             pass
     import potpourri3d as pp3d
 
-    return pp3d.MeshHeatMethodDistanceSolver(vertices, faces, t_coef=t_coef, use_robust=True).compute_distance
+    solver = pp3d.MeshHeatMethodDistanceSolver(vertices, faces, t_coef=t_coef, use_robust=True)
+    return lambda sources: np.stack([solver.compute_distance(int(s)) for s in sources], axis=1)
 
 
 def farthest_point_fields(field, n: int, k: int, first: int) -> tuple[list[int], np.ndarray]:
-    fields = np.empty((k, n), dtype=np.float32)  # a row a field: contiguous writes
+    """Sequential geodesic farthest-point sampling: ``field(source) -> (n,)``; each next landmark the vertex
+    farthest from all fields so far. Returns the landmarks and their fields, float32 (n, k). The same as
+    :func:`batched_farthest_point_fields` with batches of 1."""
+    return batched_farthest_point_fields(lambda sources: np.stack([field(s) for s in sources], axis=1),
+                                         np.zeros((n, 3)), k, first, 1)
+
+
+def batched_farthest_point_fields(fields, positions: np.ndarray, k: int, first: int, batch: int = FPS_BATCH
+                                  ) -> tuple[list[int], np.ndarray]:
+    """Geodesic farthest-point sampling in rounds of ``batch`` landmarks, one multi-source solve a round
+    (``fields(sources) -> (n, len(sources))``): a round's first landmark is the vertex farthest from every
+    field so far, each next one the farthest once the straight-line distance (``positions`` (n, 3)) to the
+    round's earlier picks also counts, a stand-in for their fields that never exceeds them. With batches
+    of 1, sequential sampling. Returns the landmarks and their fields, float32 (n, k)."""
+    from .._farthest_points import round_picks
+
+    n = len(positions)
+    positions = np.ascontiguousarray(positions, dtype=np.float64)
+    out = np.empty((k, n), dtype=np.float32)  # a row a field: contiguous writes
     nearest = np.full(n, np.inf)
-    chosen = [first]
-    for s in range(k):
-        fields[s] = field_s = _finite(field(chosen[-1]))
-        np.minimum(nearest, field_s, out=nearest)
+    chosen, picks = [], [first]
+    while True:
+        block = np.asarray(fields(picks), dtype=np.float64)
+        if not np.isfinite(block.sum()):  # one pass when all is finite (nearly always)
+            block = np.stack([_finite(column) for column in block.T], axis=1)
+        block = np.maximum(block, 0.0)
+        out[len(chosen):len(chosen) + len(picks)] = block.T
+        np.minimum(nearest, block.min(axis=1), out=nearest)
         # Never pick a landmark twice, even if the solver is off near it (the earlier ones stay at -1:
-        # fields are >= 0).
-        nearest[chosen[-1]] = -1.0
-        fields[s, chosen[-1]] = 0.0
-        if s + 1 < k:
-            chosen.append(_farthest(nearest))
-    return chosen, fields.T
+        # fields are >= 0); a landmark's own distance is 0.
+        nearest[picks] = -1.0
+        out[np.arange(len(chosen), len(chosen) + len(picks)), picks] = 0.0
+        chosen += picks
+        if len(chosen) == k:
+            return chosen, out.T
+        picks = round_picks(nearest, positions, min(batch, k - len(chosen)), TIE).tolist()
 
 
 def graph_farthest_points(points: np.ndarray, edges: np.ndarray, k: int, first: int) -> np.ndarray:

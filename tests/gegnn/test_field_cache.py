@@ -38,7 +38,7 @@ def test_specs_name_their_fields_and_read_a_models_config():
     assert FieldSpec.of(small_config(landmarks=64, points=8)) == FieldSpec("landmark", 64, 8)
     assert FieldSpec.of(small_config(spectral=32)) == FieldSpec("spectral", 32)
     mesh, cloud, codes = FieldSpec("landmark", 64), FieldSpec("landmark", 64, 8), FieldSpec("spectral", 32)
-    assert (mesh.name, cloud.name, codes.name) == ("k64", "k64-cloud8-surface2", "spectral32")
+    assert (mesh.name, cloud.name, codes.name) == ("k64-rounds16", "k64-cloud8-surface2", "spectral32")
     assert (mesh.columns, codes.columns) == (64, 33)  # the spectral codes and their tail scale
     assert (mesh.draws, cloud.draws, codes.draws) == (LANDMARK_DRAWS, LANDMARK_DRAWS, 1) and LANDMARK_DRAWS > 1
 
@@ -90,8 +90,9 @@ def test_each_mesh_and_draw_is_its_own_entry_published_once(tmp_path):
     assert json.loads((tmp_path / "fields" / "format.json").read_text()) == {"gegnn_field_cache": 2}
     # one plain .npy file an entry, no temporary file left: the layout the module's docstring gives
     files = sorted(str(f.relative_to(tmp_path / "fields")) for f in (tmp_path / "fields").rglob("*") if f.is_file())
-    assert files == ["format.json", "k3/me/mesh-0.npy", "k3/me/mesh-1.npy", "k3/ot/other-0.npy"]
-    assert np.load(tmp_path / "fields" / "k3" / "me" / "mesh-1.npy", allow_pickle=False).dtype == np.float16
+    assert files == ["format.json", "k3-rounds16/me/mesh-0.npy", "k3-rounds16/me/mesh-1.npy",
+                     "k3-rounds16/ot/other-0.npy"]
+    assert np.load(tmp_path / "fields" / "k3-rounds16" / "me" / "mesh-1.npy", allow_pickle=False).dtype == np.float16
     assert cache.get("mesh", 0).dtype == np.float32
 
 
@@ -210,7 +211,7 @@ def test_a_fills_estimate_is_the_bytes_it_writes_and_seconds_scaled_by_vertices(
     todo = [("e", ve, fe, 0), ("e", ve, fe, 1), ("g", vg, fg, 0)]
     entries, nbytes, seconds = estimate_fill(todo, spec, 0.5, len(ve))
     FieldCache(tmp_path / "c", spec).fill(todo, progress=False)
-    written = sum(f.stat().st_size for f in (tmp_path / "c" / "k6").rglob("*.npy"))
+    written = sum(f.stat().st_size for f in (tmp_path / "c" / spec.name).rglob("*.npy"))
     assert entries == 3 and nbytes == written == 3 * 128 + (2 * len(ve) + len(vg)) * 6 * 2  # float16
     assert seconds == 0.5 * (2 * len(ve) + len(vg)) / len(ve)
     codes = FieldSpec("spectral", 8)

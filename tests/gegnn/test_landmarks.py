@@ -159,6 +159,29 @@ def test_fields_are_deterministic_and_within_one_component():
     assert np.isfinite(first.distances).all() and (first.distances >= 0).all()
 
 
+@pytest.mark.parametrize("batch", [4, 16])
+def test_batched_sampling_starts_each_round_at_the_farthest_vertex_and_covers_as_sequential_sampling(batch):
+    """Landmarks chosen `batch` a round: distinct, `first` first; each round's first landmark is the vertex
+    farthest from all fields before it (what sequential sampling does every time); the fields are the solver's
+    own; the covering radius (max over vertices of the distance to the nearest landmark) within 10% of
+    sequential sampling's on a bumpy sphere."""
+    v, f = bumpy_sphere()
+    solver = HeatDistance(v, f)
+    k, first = 48, 7
+    chosen, fields = landmarks_module.batched_farthest_point_fields(solver.distances, v, k, first, batch)
+    assert chosen[0] == first and len(set(chosen)) == k and fields.shape == (len(v), k)
+    exact = np.maximum(solver.distances(chosen), 0)
+    exact[chosen, np.arange(k)] = 0
+    np.testing.assert_allclose(fields, exact, rtol=1e-6, atol=1e-7)
+    for start in range(1, k, batch):  # the first round is `first` alone
+        nearest = fields[:, :start].astype(np.float64).min(axis=1)
+        assert nearest[chosen[start]] >= nearest.max() * (1 - 1e-6)
+    seq_chosen, seq = landmarks_module.farthest_point_fields(solver.distance, len(v), k, first)
+    assert seq_chosen != chosen  # the rounds really choose otherwise
+    radius, seq_radius = fields.min(axis=1).max(), seq.min(axis=1).max()
+    assert radius < 1.1 * seq_radius
+
+
 @pytest.mark.parametrize("k", [4, 64])
 def test_several_components_and_tiny_meshes_give_finite_distances(k):
     """Two parts, a lone triangle (3 vertices < K) and an unused vertex: all finite, 0 on the diagonal."""
@@ -503,8 +526,11 @@ def test_landmarks_unchanged_from_potpourri3d_selection(monkeypatch):
     assert used == [642, 642]  # the 196-vertex grid and the 42-vertex sphere are too small to pay
     import potpourri3d as pp3d
 
-    monkeypatch.setattr(landmarks_module, "_heat_field", lambda v, f, t, k: pp3d.MeshHeatMethodDistanceSolver(
-        v, f, t_coef=t, use_robust=True).compute_distance)
+    def potpourri3d_fields(v, f, t, k):
+        solver = pp3d.MeshHeatMethodDistanceSolver(v, f, t_coef=t, use_robust=True)
+        return lambda sources: np.stack([solver.compute_distance(int(s)) for s in sources], axis=1)
+
+    monkeypatch.setattr(landmarks_module, "_heat_field", potpourri3d_fields)
     theirs = landmark_fields(v, f, 40, seed=5)
     np.testing.assert_array_equal(ours.landmarks, theirs.landmarks)
     np.testing.assert_allclose(ours.distances, theirs.distances, rtol=0, atol=1e-6)
