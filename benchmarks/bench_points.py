@@ -93,7 +93,7 @@ def exact_between(g, points: np.ndarray, pairs: np.ndarray) -> np.ndarray:
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("store")
-    ap.add_argument("--model", required=True, help="a point-cloud checkpoint (gegnn train --points)")
+    ap.add_argument("--model", required=True, help="a point-cloud checkpoint (gegnn train --neighbors)")
     ap.add_argument("--meshes", type=int, default=19)
     ap.add_argument("--kinds", nargs="+", default=list(KINDS[:4]), choices=KINDS)
     ap.add_argument("--pairs", type=int, default=20000)

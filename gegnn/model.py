@@ -180,7 +180,7 @@ class GeGnn(nn.Module):
         else:
             if faces is None:
                 raise ValueError("this model embeds meshes: give faces, or use a point-cloud model "
-                                 "(trained with gegnn train --points)")
+                                 "(trained with gegnn train --neighbors)")
             (hierarchy, fields, scale), expand, part = self.inputs(vertices, faces, device), None, None
         was_training = self.training
         self.eval()

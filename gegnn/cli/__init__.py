@@ -27,7 +27,7 @@ def main():
       gegnn query runs/a/best.safetensors mesh.obj --source 0 -o field.ply
       gegnn query --pretrained mesh.obj --source 0 --exact -o field.png
       gegnn query --pretrained mesh.obj --source 0 --path 99 -o path.png
-      gegnn query --pretrained mesh.obj --points points.csv -o distances.npy
+      gegnn query --pretrained mesh.obj --points-file points.csv -o distances.npy
       gegnn pairwise --pretrained mesh.obj -o D.npy
       gegnn finetune --pretrained mesh.obj -o tuned.safetensors
       gegnn texture --pretrained mesh.obj --center 0 -o textured.png

@@ -21,3 +21,22 @@ PRECISION_OPTION = click.option(
 SIZE_OPTION = click.option("--size", default=480, show_default=True, help="Pixels across a rendered mesh (PNG).")
 PRETRAINED_HELP = ("Use a model shipped in the package instead of CHECKPOINT: the most accurate one, or NAME "
                    f"({', '.join(repr(name) for name in PRETRAINED)}).")
+
+
+def old_name(old: str, new: str, dest: str, **kwargs):
+    """The name ``old`` of the option now called ``new``, kept for one version (renamed in 0.3.0, gone in
+    0.4.0): hidden from --help, a warning on stderr when used; its value arrives as ``dest``, for
+    :func:`either`."""
+    def warn(ctx, param, value):
+        if value is not None:
+            click.echo(f"warning: {old} is now {new}; {old} goes in gegnn 0.4.0", err=True)
+        return value
+
+    return click.option(old, dest, hidden=True, callback=warn, **kwargs)
+
+
+def either(new_value, old_value, new: str, old: str):
+    """The option's value from its new or its old name (None where neither was given)."""
+    if old_value is not None and new_value is not None:
+        raise click.UsageError(f"{old} is the old name of {new}: give {new} alone")
+    return new_value if old_value is None else old_value

@@ -7,22 +7,25 @@ import click
 
 from .inputs import (_click_errors, _embed_cloud, _load_cloud, _load_mesh, _load_model, _model_and_meshes,
                      _model_config, _output_suffix)
-from .options import DEVICE_OPTION, MODEL_ARG, PRECISION_OPTION, PREPARE_OPTION, PRETRAINED_HELP, SIZE_OPTION, UP_OPTION
+from .options import (DEVICE_OPTION, MODEL_ARG, PRECISION_OPTION, PREPARE_OPTION, PRETRAINED_HELP, SIZE_OPTION,
+                      UP_OPTION, either, old_name)
 
 
 @click.command(context_settings={"max_content_width": 100})
 @click.argument("files", **MODEL_ARG)
 @click.option("--pretrained", is_flag=True, help=PRETRAINED_HELP)
 @click.option("--source", type=int, help="Source vertex index (the file's own numbering).")
-@click.option("--pairs", "pairs_csv", type=click.Path(exists=True, dir_okay=False),
+@click.option("--pairs-file", "pairs_csv", type=click.Path(exists=True, dir_okay=False),
               help="Answer the pairs of this CSV (two integer columns i,j; a header is allowed).")
-@click.option("--points", "points_file", type=click.Path(exists=True, dir_okay=False),
+@click.option("--points-file", "points_file", type=click.Path(exists=True, dir_okay=False),
               help="Distances between points anywhere on the surface: xyz in a .npy array (P, 3) or a CSV x,y,z "
                    "(a header is allowed), in the mesh's units; each is moved to the closest surface point.")
+@old_name("--pairs", "--pairs-file", "old_pairs", type=click.Path(exists=True, dir_okay=False))
+@old_name("--points", "--points-file", "old_points", type=click.Path(exists=True, dir_okay=False))
 @click.option("-o", "--output", type=click.Path(dir_okay=False),
               help="With --source: field.npy (per file vertex), field.ply (colored mesh) or field.png "
-                   "(rendered). With --pairs: a CSV i,j,distance (default: stdout). With --points: the "
-                   "(P, P) matrix as .npy or .csv (default: stdout).")
+                   "(rendered). With --pairs-file: a CSV i,j,distance (default: stdout). With --points-file: "
+                   "the (P, P) matrix as .npy or .csv (default: stdout).")
 @click.option("--exact", is_flag=True, help="Also compute the exact field (geodata's exact solver of the distance "
                                             "the model predicts: geodesic or biharmonic) and report the error; a "
                                             "PNG shows predicted | exact | relative error.")
@@ -37,8 +40,8 @@ from .options import DEVICE_OPTION, MODEL_ARG, PRECISION_OPTION, PREPARE_OPTION,
 @PRECISION_OPTION
 @UP_OPTION
 @SIZE_OPTION
-def query(files, pretrained, source, pairs_csv, points_file, output, exact, cloud_mesh, path_to, prepare, device,
-          precision, up, size):
+def query(files, pretrained, source, pairs_csv, points_file, old_pairs, old_points, output, exact, cloud_mesh, path_to,
+          prepare, device, precision, up, size):
     """Distances on MESH (OBJ/OFF/PLY/STL/GLB, any units) predicted by CHECKPOINT or --pretrained: geodesic,
     or biharmonic with a biharmonic model (--pretrained biharmonic).
 
@@ -49,31 +52,34 @@ def query(files, pretrained, source, pairs_csv, points_file, output, exact, clou
       gegnn query --pretrained bunny.obj --source 0 --path 1234 --exact -o path.png
       gegnn query --pretrained paper bunny.obj --source 0 --exact -o compare.png
       gegnn query --pretrained biharmonic bunny.obj --source 0 --exact -o compare.png
-      gegnn query runs/a/best.safetensors bunny.obj --pairs pairs.csv -o distances.csv
-      gegnn query --pretrained bunny.obj --points clicks.csv --exact -o distances.npy
-      gegnn query --pretrained points scan.xyz --pairs pairs.csv -o distances.csv
+      gegnn query runs/a/best.safetensors bunny.obj --pairs-file pairs.csv -o distances.csv
+      gegnn query --pretrained bunny.obj --points-file clicks.csv --exact -o distances.npy
+      gegnn query --pretrained points scan.xyz --pairs-file pairs.csv -o distances.csv
 
     Distances are in the mesh's units. The PLY and PNG show the mesh the network ran on (with
     --prepare, the remeshed one); .npy and CSV outputs use the file's vertex numbering. A point-cloud
     model (--pretrained points) reads a cloud (.xyz .txt .pts .csv .npy .ply) instead of MESH and answers
-    --source or --pairs in the file's point numbering.
+    --source or --pairs-file in the file's point numbering. (--pairs and --points, the old names of
+    --pairs-file and --points-file, work until 0.4.0.)
     """
     import numpy as np
 
     from ..queries.files import read_pairs
 
+    pairs_csv = either(pairs_csv, old_pairs, "--pairs-file", "--pairs")
+    points_file = either(points_file, old_points, "--points-file", "--points")
     model_spec, (mesh_path,) = _model_and_meshes(files, pretrained)
     config = _model_config(model_spec, pretrained)
     if config.points:
         if (source is None) == (pairs_csv is None) or points_file or path_to is not None or prepare:
             raise click.UsageError("a point-cloud model answers --source I (with --exact --mesh MESH to compare) "
-                                   "or --pairs FILE")
+                                   "or --pairs-file FILE")
     elif cloud_mesh:
         raise click.UsageError("--mesh goes with a point-cloud model (the file is the mesh here)")
     elif sum(x is not None for x in (source, pairs_csv, points_file)) != 1:
-        raise click.UsageError("give one of --source, --pairs or --points")
+        raise click.UsageError("give one of --source, --pairs-file or --points-file")
     if exact and pairs_csv:
-        takes = "--source" if config.points else "--source or --points"
+        takes = "--source" if config.points else "--source or --points-file"
         raise click.UsageError(f"--exact goes with {takes} (it compares whole fields)")
     if path_to is not None and source is None:
         raise click.UsageError("--path goes with --source (the path runs from the source)")
@@ -135,7 +141,7 @@ def query(files, pretrained, source, pairs_csv, points_file, output, exact, clou
 
 def _query_points(model_spec, pretrained, mesh_path, points_file, output, suffix, exact, prepare, device,
                   precision):
-    """``gegnn query --points``: the (P, P) matrix between surface points, optionally against exact distances
+    """``gegnn query --points-file``: the (P, P) matrix between surface points, optionally against exact distances
     between the same points inserted as vertices."""
     import numpy as np
 
@@ -185,7 +191,7 @@ def _write_pairs(pairs, distances, output) -> None:
 
 
 def _query_cloud_pairs(model_spec, pretrained, cloud_path, pairs_csv, output, device, precision):
-    """``gegnn query --pairs`` with a point-cloud model: the distance of every pair of the file's points, NaN
+    """``gegnn query --pairs-file`` with a point-cloud model: the distance of every pair of the file's points, NaN
     where a point is a far outlier or the two lie on different parts of the neighbour graph."""
     import numpy as np
 

@@ -10,7 +10,7 @@ import click
 
 from ..config import GeGnnConfig
 from .inputs import _click_errors, _load_mesh, _load_model, _model_and_meshes, _output_suffix
-from .options import DEVICE_OPTION, MODEL_ARG, PRETRAINED_HELP
+from .options import DEVICE_OPTION, MODEL_ARG, PRETRAINED_HELP, either, old_name
 
 
 def _workers(ctx, param, value):
@@ -93,14 +93,16 @@ def _blocks(ctx, param, value):
                    "decoder on an --init network; ~10 ms a step on CPU against ~3 s for a network step).")
 @click.option("--landmark-output", type=click.Choice(["ratio", "interval"]), default="ratio", show_default=True,
               help="d = L exp(MLP), or (ablation) d = L + (U - L) sigmoid(MLP); L, U: the landmark bounds.")
-@click.option("--points", type=click.IntRange(0), default=0, is_flag=False, flag_value=8, metavar="[K]",
+@click.option("--neighbors", type=click.IntRange(0), default=None, is_flag=False, flag_value=8, metavar="[K]",
               help="Point-cloud model: each mesh's vertices are read as a cloud (faces unused): graph of the K "
-                   "nearest neighbours (--points alone: 8), estimated normals, point-cloud heat-method landmark "
+                   "nearest neighbours (--neighbors alone: 8), estimated normals, point-cloud heat-method landmark "
                    "fields (default 0: meshes). With --init, a mesh model's weights start it.")
+@old_name("--points", "--neighbors", "old_points", type=click.IntRange(0), is_flag=False, flag_value=8)
 def train(run_dir, no_rotate, init_ckpt, channels, blocks, aggr, no_edge_length, no_relative_position,
           plain_grid_pool, euclidean_decoder, landmarks, landmark_no_embedding, landmark_no_euclidean, spectral,
-          spectral_no_embedding, landmark_output, points, **options):
+          spectral_no_embedding, landmark_output, neighbors, old_points, **options):
     """Train GeGnn on the geodata store STORE."""
+    points = either(neighbors, old_points, "--neighbors", "--points") or 0
     from ..training.loop import StoreMismatch, TrainConfig
     from ..training.loop import train as run_training
 
@@ -216,10 +218,11 @@ def finetune(files, pretrained, output, sources, held_out, decoder_steps, head_s
 @click.argument("checkpoint", type=click.Path(exists=True, dir_okay=False))
 @click.argument("output", type=click.Path(dir_okay=False))
 @click.option("--dtype", type=click.Choice(["fp16", "bf16", "fp32"]), default="fp16", show_default=True)
-@click.option("--points", type=click.IntRange(min=1), metavar="K",
+@click.option("--neighbors", type=click.IntRange(min=1), metavar="K",
               help="Export a landmark mesh model as a point-cloud model of the same weights (graph of the K "
                    "nearest neighbours; the network reads any graph with positions and normals).")
-def export(checkpoint, output, dtype, points):
+@old_name("--points", "--neighbors", "old_points", type=click.IntRange(min=1))
+def export(checkpoint, output, dtype, neighbors, old_points):
     """Weights-only copy of CHECKPOINT for shipping: no optimizer or RNG state, weights in DTYPE.
 
     Keeps the config and the training metadata (epoch, metrics, options)."""
@@ -230,11 +233,12 @@ def export(checkpoint, output, dtype, points):
     from ..checkpoint import load_checkpoint, save_checkpoint
     from ..model import GeGnn
 
+    points = either(neighbors, old_points, "--neighbors", "--points")
     ckpt = load_checkpoint(checkpoint)
     config = ckpt.config
     if points is not None:
         if not config.landmarks:
-            raise click.UsageError(f"--points: {Path(checkpoint).name} is not a landmark model (a point-cloud "
+            raise click.UsageError(f"--neighbors: {Path(checkpoint).name} is not a landmark model (a point-cloud "
                                    "model reads landmark fields)")
         config = dataclasses.replace(config, points=points)
     model = GeGnn(config)

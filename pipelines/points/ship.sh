@@ -10,7 +10,7 @@ neurogf=${3:-}
 mkdir -p "$runs"
 
 # The landmark model's weights as they are, read as a point-cloud model (8 neighbours).
-gegnn export gegnn/weights/gegnn-landmark-v1.safetensors gegnn/weights/gegnn-points-v1.safetensors --points 8
+gegnn export gegnn/weights/gegnn-landmark-v1.safetensors gegnn/weights/gegnn-points-v1.safetensors --neighbors 8
 
 # Area-uniform surface points per validation mesh with exact distances between them (the `surface` kind):
 # 8,000 in the store itself, 32,000 in a copy made before (a store holds one points subgroup a mesh): the

@@ -259,7 +259,7 @@ def test_query_path_texture_and_shape_distribution_commands(ellipsoid_obj, tmp_p
     assert result.exit_code == 0, result.output
     ratio = float(result.output.split("predicted path / edge-flip path ")[1].split()[0])
     assert ratio == pytest.approx(1, abs=0.05)
-    result = run(main, ["query", "--pretrained", path, "--pairs", path, "--path", "3"])
+    result = run(main, ["query", "--pretrained", path, "--pairs-file", path, "--path", "3"])
     assert result.exit_code != 0 and "--path goes with --source" in result.output
 
     result = run(main, ["texture", "--pretrained", path, "--center", "7", "--compare", "-o", str(tmp_path / "t.png")])

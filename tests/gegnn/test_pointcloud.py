@@ -177,15 +177,16 @@ def test_train_a_cloud_model_on_a_stores_vertices(tiny_store, tmp_path):
     run = tmp_path / "run"
     result = CliRunner().invoke(main, ["train", tiny_store, "--run", str(run), "--epochs", "1", "--batch-size", "2",
                                        "--device", "cpu", "--channels", "16", "--blocks", "1,1,1,1,1",
-                                       "--pairs-per-mesh", "200", "--landmarks", "8", "--points", "6"])
+                                       "--pairs-per-mesh", "200", "--landmarks", "8", "--neighbors", "6"])
     assert result.exit_code == 0, result.output
     model = GeGnn.from_checkpoint(run / "best.safetensors")
     assert model.config.points == 6 and model.config.landmarks == 8
     assert (run / "fields" / "k8-cloud6-surface2").exists()  # the cloud's fields, apart from a mesh model's
     with open(run / "metrics.csv") as f:
         assert float(next(csv.DictReader(f))["val_mre"]) < 1.0
-    from gegnn.cli import train  # --points alone (DESIGN's command line) is the shipped model's 8 neighbours
-    assert train.make_context("train", [tiny_store, "--points", "--run", str(run)]).params["points"] == 8
+    from gegnn.cli import train  # --neighbors alone is the shipped model's 8 neighbours; so is DESIGN's --points
+    assert train.make_context("train", [tiny_store, "--neighbors", "--run", str(run)]).params["neighbors"] == 8
+    assert train.make_context("train", [tiny_store, "--points", "--run", str(run)]).params["old_points"] == 8
 
 
 def test_query_a_cloud_with_an_outlier_against_the_exact_field(cloud_model, tmp_path):
@@ -294,7 +295,7 @@ def test_export_points_turns_a_landmark_mesh_model_into_a_cloud_model_of_the_sam
     mesh_model = GeGnn(small_config(landmarks=8))
     mesh_model.save(tmp_path / "mesh.safetensors")
     result = CliRunner().invoke(main, ["export", str(tmp_path / "mesh.safetensors"),
-                                       str(tmp_path / "cloud.safetensors"), "--points", "6", "--dtype", "fp32"])
+                                       str(tmp_path / "cloud.safetensors"), "--neighbors", "6", "--dtype", "fp32"])
     assert result.exit_code == 0 and "a point-cloud model (6 neighbours)" in result.output, result.output
     cloud = GeGnn.from_checkpoint(tmp_path / "cloud.safetensors")
     assert cloud.config.points == 6 and cloud.config.landmarks == 8
@@ -303,7 +304,7 @@ def test_export_points_turns_a_landmark_mesh_model_into_a_cloud_model_of_the_sam
     assert np.isfinite(cloud.embed(fibonacci_sphere(300)).field(0)).all()
     GeGnn(small_config()).save(tmp_path / "paper.safetensors")
     result = CliRunner().invoke(main, ["export", str(tmp_path / "paper.safetensors"), str(tmp_path / "x.safetensors"),
-                                       "--points", "6"])
+                                       "--points", "6"])  # the old name: a warning, the same check
     assert result.exit_code == 2 and "paper.safetensors is not a landmark model" in result.output
 
 

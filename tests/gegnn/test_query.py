@@ -68,7 +68,7 @@ def test_pairs_csv_matches_the_field(soup, ckpt, tmp_path):
     pairs = tmp_path / "pairs.csv"
     pairs.write_text("i,j\n0,5\n0,9\n3,3\n")
     out = tmp_path / "d.csv"
-    result = CliRunner().invoke(main, ["query", ckpt, path, "--pairs", str(pairs), "-o", str(out)])
+    result = CliRunner().invoke(main, ["query", ckpt, path, "--pairs-file", str(pairs), "-o", str(out)])
     assert result.exit_code == 0, result.output
     rows = out.read_text().splitlines()
     assert rows[0] == "i,j,distance" and len(rows) == 4
@@ -89,7 +89,7 @@ def test_clear_errors(soup, ckpt, tmp_path):
     r = runner.invoke(main, ["query", ckpt, str(bad), "--source", "0"])
     assert r.exit_code != 0 and "bad.obj: load: line 3: face refers to vertex 3; the file has 2 vertices" in r.output
     r = runner.invoke(main, ["query", ckpt, path])
-    assert r.exit_code != 0 and "--source, --pairs or --points" in r.output
+    assert r.exit_code != 0 and "--source, --pairs-file or --points-file" in r.output
     r = runner.invoke(main, ["query", path, "--source", "0"])
     assert r.exit_code != 0 and "--pretrained [NAME] MESH" in r.output
     (tmp_path / "afile").write_text("")
@@ -175,7 +175,7 @@ def test_pairwise_matrix_in_file_numbering_exact_and_heat(soup, ckpt, tmp_path):
     assert len(twins) > 1 and not d[np.ix_(twins, twins)].any()
     pairs = tmp_path / "pairs.csv"
     pairs.write_text("i,j\n0,5\n7,300\n")
-    runner.invoke(main, ["query", ckpt, path, "--pairs", str(pairs), "-o", str(tmp_path / "p.csv")])
+    runner.invoke(main, ["query", ckpt, path, "--pairs-file", str(pairs), "-o", str(tmp_path / "p.csv")])
     answered = [float(line.split(",")[2]) for line in (tmp_path / "p.csv").read_text().splitlines()[1:]]
     np.testing.assert_allclose([d[0, 5], d[7, 300]], answered, rtol=1e-5)
 
@@ -216,7 +216,7 @@ def test_query_points_on_the_surface(soup, ckpt, tmp_path):
     points = np.concatenate([v[f[0, :1]], inside, above])
     np.save(tmp_path / "pts.npy", points)
     runner = CliRunner()
-    r = runner.invoke(main, ["query", ckpt, path, "--points", str(tmp_path / "pts.npy"), "--exact",
+    r = runner.invoke(main, ["query", ckpt, path, "--points-file", str(tmp_path / "pts.npy"), "--exact",
                              "-o", str(tmp_path / "d.npy")])
     assert r.exit_code == 0, r.output
     assert "7 points, at most" in r.output and "mean relative error vs exact (points inserted as vertices)" in r.output
@@ -224,12 +224,13 @@ def test_query_points_on_the_surface(soup, ckpt, tmp_path):
     assert d.shape == (7, 7) and not np.diag(d).any() and d[0, 6] == 0  # the off-surface copy lands on the vertex
     np.testing.assert_allclose(d, d.T, rtol=1e-5)
     (tmp_path / "pts.csv").write_text("x,y,z\n" + "\n".join(",".join(map(str, p)) for p in points[:3]))
-    r = runner.invoke(main, ["query", ckpt, path, "--points", str(tmp_path / "pts.csv")])
+    r = runner.invoke(main, ["query", ckpt, path, "--points", str(tmp_path / "pts.csv")])  # the old name, with a warning
     assert r.exit_code == 0, r.output
-    printed = np.array([[float(x) for x in line.split(",")] for line in r.output.splitlines()[1:]])
+    assert "warning: --points is now --points-file; --points goes in gegnn 0.4.0" in r.stderr
+    printed = np.array([[float(x) for x in line.split(",")] for line in r.stdout.splitlines()[1:]])
     np.testing.assert_allclose(printed, d[:3, :3], rtol=1e-5)
     (tmp_path / "bad.csv").write_text("1,2\n")
-    r = runner.invoke(main, ["query", ckpt, path, "--points", str(tmp_path / "bad.csv")])
+    r = runner.invoke(main, ["query", ckpt, path, "--points-file", str(tmp_path / "bad.csv")])
     assert r.exit_code != 0 and "bad.csv: expected three number columns x,y,z" in r.output
-    r = runner.invoke(main, ["query", ckpt, path, "--points", str(tmp_path / "pts.csv"), "--source", "0"])
-    assert r.exit_code != 0 and "one of --source, --pairs or --points" in r.output
+    r = runner.invoke(main, ["query", ckpt, path, "--points-file", str(tmp_path / "pts.csv"), "--source", "0"])
+    assert r.exit_code != 0 and "one of --source, --pairs-file or --points-file" in r.output
