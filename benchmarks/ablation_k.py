@@ -10,7 +10,7 @@ depend on K). Default: the shipped model at K = 128, 256, 512 and 1024. For each
   - on the mesh --mesh (default dragon-4af53808, 5,224 vertices): embed (landmark fields + one forward
     pass, fp32) and 1M random queries, best of 3, and their sum against the heat method for the same
     1M pairs (potpourri3d, one field per distinct source, measured once in this run).
---fps-batch runs every model once per B: landmarks chosen B a round (gegnn.fields.landmarks.FPS_BATCH;
+--record writes each NAME=...'s MRE to docs/results.json (mre.NAME). --fps-batch runs every model once per B: landmarks chosen B a round (gegnn.fields.landmarks.FPS_BATCH;
 1 is sequential farthest-point sampling).
 Prints a markdown table (for docs/results.md) with the CPU.
 """
@@ -52,6 +52,8 @@ def main():
     ap.add_argument("models", nargs="*", default=[f"shipped@{k}" for k in (128, 256, 512, 1024)])
     ap.add_argument("--mesh", default="dragon-4af53808", help="a mesh id of the store, or a unique prefix of one")
     ap.add_argument("--out", help="also write the table to this file (for bench_results.py --landmarks-table)")
+    ap.add_argument("--record", action="store_true",
+                    help="write each named model's validation MRE to docs/results.json as mre.NAME")
     ap.add_argument("--fps-batch", type=int, nargs="+", default=[landmarks.FPS_BATCH],
                     help="landmarks chosen a round, each a row (default: gegnn.fields.landmarks.FPS_BATCH)")
     args = ap.parse_args()
@@ -76,6 +78,10 @@ def main():
             lines.append(f"| {name} | {model.config.landmarks} | {batch} | {100 * mre:.3f}% | {embed:.3f} | "
                          f"{query:.3f} | {embed + query:.3f} | {heat / (embed + query):.1f}x |")
             print(lines[-1], flush=True)
+            if args.record and "=" in spec:
+                from results import record
+
+                record(f"mre.{name}", f"{100 * mre:.2f}%")
     print("\n" + "\n".join(lines))
     if args.out:
         Path(args.out).write_text(f"CPU: {cpu_description()}; heat method for the 1M pairs: {heat:.2f} s.\n\n"

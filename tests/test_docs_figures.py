@@ -141,3 +141,26 @@ def test_pages_count_the_shipped_models():
     card = read_page("docs/model-card.md")
     for name in PRETRAINED:
         assert f'`"{name}"`' in card, f"the model card has no row for {name!r}"
+
+
+def test_a_benchmark_records_a_figure_with_its_command_date_and_cpu(tmp_path, monkeypatch):
+    """benchmarks/results.py record: the figure's value, this command line, today's date and this CPU replace
+    the old ones; the other figures stay as they were; a new figure must say what it is and where."""
+    import datetime
+    import sys
+
+    monkeypatch.syspath_prepend(str(ROOT / "benchmarks"))
+    from results import record
+
+    path = tmp_path / "results.json"
+    path.write_text(RESULTS.read_text())
+    monkeypatch.setattr(sys, "argv", ["benchmarks/bench_queries.py", "data/val.zarr", "--record"])
+    record("speedup.landmark-v2", "99.9x", path=path)
+    before, after = figures(), json.loads(path.read_text())["figures"]
+    entry = after["speedup.landmark-v2"]
+    assert entry["value"] == "99.9x" and entry["date"] == datetime.date.today().isoformat()
+    assert entry["command"] == "python benchmarks/bench_queries.py data/val.zarr --record"
+    assert entry["cpu"] and entry["what"] == before["speedup.landmark-v2"]["what"] and "note" not in entry
+    assert list(after) == list(before) and all(after[k] == before[k] for k in before if k != "speedup.landmark-v2")
+    with pytest.raises(ValueError, match="new figure"):
+        record("mre.landmark-v9", "0.5%", path=path)
