@@ -459,7 +459,7 @@ def test_each_rank_fills_its_share_by_mesh_id_reading_only_meshes_with_missing_f
         reads.clear()
         gtrain.fill_field_cache(path, spec, [(ds, ids, range(3))], Dist(rank, 2), torch.device("cpu"), log)
         assert sorted(reads) == share
-        assert lines[-2].startswith(f"landmark fields: {3 * len(share)} to compute (k4), ~")
+        assert lines[-2].startswith(f"landmark fields: {3 * len(share)} to compute (k4-rounds16), ~")
         assert "with " in lines[-2] and lines[-1].startswith(f"landmark fields: {3 * len(share)} computed in ")
     cache = FieldCache(path, spec)
     assert all(cache.has(ds.store.key(m), seed) for m in ids for seed in range(3))
