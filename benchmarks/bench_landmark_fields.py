@@ -8,7 +8,7 @@ dragon-4af53808); without STORE, data/val.zarr's dragon when it is there (STORE/
 mesh path, is read as STORE and --mesh ID). A synthetic 5,000-vertex torus always runs. The reference
 (potpourri3d, one ``compute_distance`` a landmark) is timed in the same run; times are the best of --repeat, one thread.
 
-Batched variant (not what landmark_fields does): rounds of B landmarks, the first of a round the exact
+Batched sampling (what landmark_fields does, with B = FPS_BATCH, since 0.3.0): rounds of B landmarks, the first of a round the exact
 farthest vertex, the others chosen greedily with the Euclidean distance to the round's earlier picks as a
 stand-in for their fields; then one B-column solve. And landmarks chosen along the mesh's edges
 (``graph_farthest_points``, as point clouds choose theirs), then all fields in one call. Both change the
@@ -31,8 +31,8 @@ from stores import MeshIdError, mesh_id
 from geodata import store as geostore
 from geodata.mesh import unique_edges
 from gegnn.fields.heat import HeatDistance
-from gegnn.fields.landmarks import (T_COEF, _farthest, farthest_point_fields, graph_farthest_points, landmark_columns,
-                                    landmark_fields)
+from gegnn.fields.landmarks import (T_COEF, batched_farthest_point_fields, farthest_point_fields, graph_farthest_points,
+                                    landmark_columns, landmark_fields)
 
 STORE, DRAGON = "data/val.zarr", "dragon-4af53808"
 
@@ -75,26 +75,9 @@ def heat_fps(v, f, k, first):
 
 
 def batched_fps(v, f, k, first, batch):
-    """Rounds of `batch` landmarks: the exact farthest vertex, then greedy picks against the Euclidean
-    distance to this round's picks; one multi-source solve a round."""
-    solver = HeatDistance(v, f, T_COEF)
-    nearest = np.full(len(v), np.inf)
-    chosen, fields = [], []
-    while len(chosen) < k:
-        stand_in = nearest.copy()
-        picks = [first] if not chosen else []
-        while len(picks) < min(batch, k - len(chosen)):
-            for p in picks[len(picks) - 1:]:
-                np.minimum(stand_in, np.linalg.norm(v - v[p], axis=1), out=stand_in)
-                stand_in[p] = -1.0
-            picks.append(_farthest(stand_in))
-        block = np.maximum(solver.distances(picks), 0.0)
-        block[picks, np.arange(len(picks))] = 0.0
-        np.minimum(nearest, block.min(axis=1), out=nearest)
-        nearest[picks] = -1.0
-        chosen += picks
-        fields.append(block)
-    return chosen, np.concatenate(fields, axis=1)
+    """Rounds of `batch` landmarks (gegnn.fields.landmarks.batched_farthest_point_fields, what landmark_fields
+    does with FPS_BATCH); one multi-source solve a round."""
+    return batched_farthest_point_fields(HeatDistance(v, f, T_COEF).distances, v, k, first, batch)
 
 
 def graph_fps(v, f, k, first):

@@ -25,10 +25,10 @@ import torch
 from gegnn import GeGnn, decoders
 from gegnn._pair_features import decode_pairs, landmark_features
 from gegnn.decoders import compiled_isa
-from gegnn.queries.embedding import CHUNK_VALUES, Embedding
 from geodata import store as geostore
 
 from bench_gegnn import torus_mesh  # benchmarks/ is on sys.path when a script there runs
+from bench_queries import torch_path
 from machine import cpu_description
 from stores import mesh_id
 
@@ -93,9 +93,7 @@ def main():
         rows.append((f"    MLP alone ({n_in} -> {hidden} -> {hidden} -> 1, {n_in}-wide rows)", best(
             lambda: decode_pairs(table, i, j, 0, 0, 0, False, False, weights, biases, t, lower, upper, th,
                                  compiled_isa()))))
-        reference = Embedding(codes, dec, emb.scale)
-        reference._fused = False
-        reference.chunk = max(1024, CHUNK_VALUES // dec.pair_width(codes))
+        reference = torch_path(emb)
         rows.append(("  torch path (fused features, torch's MLP)", best(lambda: reference.distance(i, j), 2)))
     torch.set_num_threads(threads)
     macs = sum(w.shape[0] * w.shape[1] for w in weights)

@@ -39,14 +39,19 @@ struct Layout {
     int64_t n_in() const { return (embedding ? d : 0) + 5 + (euclidean ? 1 : 0) + 1; }
 };
 
+// row[c] = (a[c] - b[c])^2 for c < n: the embedding part of a decoder's features.
+GEGNN_INLINE void squared_difference(const float* a, const float* b, int64_t n, float* row) {
+    for (int64_t c = 0; c < n; ++c) {
+        const float t = a[c] - b[c];
+        row[c] = t * t;
+    }
+}
+
 // One pair's row of landmark features (the layout above), and its bounds.
 GEGNN_INLINE void landmark_row(const float* a, const float* b, const Layout& L, float* row, float& lower,
                                float& upper) {
     if (L.embedding) {
-        for (int64_t c = 0; c < L.d; ++c) {
-            const float t = a[c] - b[c];
-            row[c] = t * t;
-        }
+        squared_difference(a, b, L.d, row);
         row += L.d;
     }
     const float* fa = a + L.d;
@@ -151,14 +156,10 @@ GEGNN_INLINE void decode_range(const Decode& job, int64_t begin, int64_t end) {
             const float* a = job.codes + job.ia[p] * width;
             const float* b = job.codes + job.ib[p] * width;
             float* row = x.data() + r * n0;
-            if (job.mode == LANDMARK) {
+            if (job.mode == LANDMARK)
                 landmark_row(a, b, job.L, row, job.lower[p], job.upper[p]);
-            } else {
-                for (int64_t c = 0; c < width; ++c) {
-                    const float d = a[c] - b[c];
-                    row[c] = d * d;
-                }
-            }
+            else
+                squared_difference(a, b, width, row);
         }
         const float* in = x.data();
         int64_t ld = n0;
