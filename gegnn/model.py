@@ -12,7 +12,6 @@ from torch import Tensor, nn
 
 from geodata.mesh import Mesh, unique_edges, vertex_normals
 from geodata.stages.normalize import normalization
-from geodata.surface_points import locate_points
 
 from .checkpoint import load_checkpoint, save_checkpoint
 from .config import GeGnnConfig
@@ -22,7 +21,7 @@ from .graph import Graph, mesh_graph
 from .nn import GeoConv, GeoPool, GeoUnpool, Hierarchy, ResBlocks, build_hierarchy
 from .precision import resolve
 from .queries.embedding import Embedding
-from .queries.proxy import cloud_subset, cloud_weights, decimate, proxy_size
+from .queries.proxy import cloud_subset, cloud_weights, proxy_of, proxy_size
 from .threads import beside, fewer_for_torch
 
 __all__ = ["GeGnnConfig", "GeGnn", "DistanceDecoder", "LandmarkDecoder", "SpectralDecoder"]
@@ -137,7 +136,8 @@ class GeGnn(nn.Module):
         ``PROXY_ABOVE`` (40,000) vertices is embedded through a proxy of the same surface with ``PROXY_VERTICES``
         (20,000) (``proxy``: ``"auto"``, another vertex count, or None for the mesh itself;
         :mod:`gegnn.queries.proxy`): the network and fields run at the resolution the model knows, every vertex
-        of the mesh gets the code of its closest point on the proxy, and all queries answer on the mesh's own
+        of the mesh gets the code of its closest point on its own connected part's proxy (each part keeps at
+        least ``PART_VERTICES``, or all its own), and all queries answer on the mesh's own
         vertices. A cloud of more points likewise: a random subset of that size is embedded, and every point
         gets the blend of its 3 nearest subset points' codes. With more than one torch thread
         (``torch.set_num_threads``) the U-Net runs on a thread of its own while the fields are computed,
@@ -164,10 +164,9 @@ class GeGnn(nn.Module):
                 corners, weights = cloud_weights(points, subset)
                 return emb.blended(corners, weights, part=emb.part[corners[:, 0]])
             vertices, faces = _validated(vertices, faces)
-            coarse = decimate(vertices, faces, target)
-            places = locate_points(coarse, vertices)  # each vertex's closest point on the proxy
-            return self._embed(coarse.vertices, coarse.faces, precision, None, requested).at_points(
-                places.face, places.bary, vertices=vertices, faces=faces)
+            proxy = proxy_of(vertices, faces, target)  # each vertex's closest point on its part's proxy
+            return self._embed(proxy.mesh.vertices, proxy.mesh.faces, precision, None, requested).at_points(
+                proxy.face, proxy.bary, vertices=vertices, faces=faces)
 
     def _embed(self, vertices, faces, precision, normals, requested):
         """One forward pass with the network in ``precision`` ("fp32" or "bf16"); the embedding's decoder

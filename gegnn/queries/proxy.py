@@ -1,6 +1,10 @@
 """A large mesh embedded through a proxy: the same surface with fewer vertices (edge collapse and remesh), embedded
-once; every vertex of the large mesh then gets the code of its closest point on the proxy (a blend of the
-proxy's vertex codes, :meth:`gegnn.queries.embedding.Embedding.at_points`). The network and the landmark
+once; every vertex of the large mesh then gets the code of its closest point on the proxy of its own connected
+part (a blend of the proxy's vertex codes, :meth:`gegnn.queries.embedding.Embedding.at_points`). Each part is
+decimated on its own, to its share of the proxy's vertices by area but never below ``PART_VERTICES``; a part
+of at most twice that is kept as it is: a screw, an eye or a bolt beside a large body keeps its own
+distances (decimated with the body, a 642-vertex sphere of radius 0.02 beside a unit sphere kept 4 proxy
+vertices and its antipodes came out 0 apart). The network and the landmark
 fields run at the resolution the model was trained at, whatever the user's resolution; what scales with the
 user's mesh is the decimation and one closest-point query per vertex (libigl's AABB tree), both near-linear.
 A large point cloud likewise: a random subset embedded, every point blended from its 3 nearest subset points.
@@ -9,14 +13,17 @@ from __future__ import annotations
 
 import numpy as np
 
-from geodata.mesh import Mesh
+from typing import NamedTuple
 
-__all__ = ["PROXY_ABOVE", "PROXY_VERTICES", "proxy_size", "decimate", "triangle_quality", "cloud_subset",
-           "cloud_weights"]
+from geodata.mesh import Mesh, face_areas, label_groups, vertex_components
+
+__all__ = ["PROXY_ABOVE", "PROXY_VERTICES", "PART_VERTICES", "Proxy", "proxy_size", "proxy_of", "decimate",
+           "triangle_quality", "cloud_subset", "cloud_weights"]
 
 PROXY_ABOVE = 40_000  # meshes with more vertices are embedded through a proxy (docs/benchmarks.md)
 PROXY_VERTICES = 20_000  # the proxy's vertex count
 COARSE = 3  # the edge collapse stops at COARSE x the proxy's vertices, the remesh does the rest
+PART_VERTICES = 500  # a connected part's fewest proxy vertices (a part of at most twice this is kept whole)
 SLIVERS = 0.05  # a mesh with more faces of quality < 0.1 than this is collapsed by pymeshlab (see decimate)
 
 
@@ -31,6 +38,66 @@ def proxy_size(n_vertices: int, proxy) -> int | None:
     if not isinstance(proxy, (int, np.integer)) or isinstance(proxy, bool) or proxy < 100:
         raise ValueError(f"proxy must be 'auto', None or a vertex count >= 100, got {proxy!r}")
     return int(proxy) if n_vertices > proxy else None
+
+
+class Proxy(NamedTuple):
+    """A mesh's proxy and where each of the mesh's vertices lies on it: on a face of the proxy of its own
+    connected part (``face`` (N,) int64, ``bary`` (N, 3) barycentric coordinates)."""
+    mesh: Mesh
+    face: np.ndarray
+    bary: np.ndarray
+
+
+def proxy_of(vertices: np.ndarray, faces: np.ndarray, target_vertices: int) -> Proxy:
+    r"""The proxy of a mesh with about ``target_vertices`` (:math:`T`) vertices, part by part. Connected part
+    :math:`c` of area :math:`A_c` and :math:`n_c` vertices is decimated (:func:`decimate`) to
+    :math:`t_c = \max(\mathrm{round}(T A_c / \sum A), \mathrm{PART\_VERTICES})` vertices when
+    :math:`n_c > \max(t_c, 2\,\mathrm{PART\_VERTICES})`, else kept as it is. A vertex is placed on its own part's
+    proxy (the closest point there, libigl's AABB tree), a vertex of a part kept whole at itself; a vertex on
+    no face, on the closest point of the whole proxy."""
+    from geodata.surface_points import locate_points
+
+    v, f = np.asarray(vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64)
+    labels = vertex_components(Mesh(v, f))
+    n_parts = int(labels.max()) + 1
+    face_part = labels[f[:, 0]]
+    area = np.bincount(face_part, face_areas(v, f), minlength=n_parts)
+    goal = np.maximum(np.rint(target_vertices * area / max(area.sum(), np.finfo(float).tiny)), PART_VERTICES)
+    size = np.bincount(labels, minlength=n_parts)
+    whole = (size <= goal) | (size <= 2 * PART_VERTICES)
+    face, bary = np.full(len(v), -1, dtype=np.int64), np.zeros((len(v), 3))
+    pieces, offset = [], 0  # the proxy's vertices and faces, part by part
+
+    def add(piece: Mesh) -> int:
+        nonlocal offset
+        first = sum(len(p.faces) for p in pieces)
+        pieces.append(Mesh(piece.vertices, piece.faces + offset))
+        offset += piece.n_vertices
+        return first
+
+    kept = np.flatnonzero(whole[face_part])
+    if len(kept):  # the parts kept whole, in one piece: each vertex at a corner of one of its faces
+        idx = np.flatnonzero(whole[labels])
+        local = np.full(len(v), -1, dtype=np.int64)
+        local[idx] = np.arange(len(idx))
+        first = add(Mesh(v[idx], local[f[kept]]))
+        for k in range(3):
+            face[f[kept, k]] = first + np.arange(len(kept))
+            bary[f[kept, k]] = np.eye(3)[k]
+    vertex_groups, face_groups = label_groups(labels, n_parts), label_groups(face_part, n_parts)
+    for c in np.flatnonzero(~whole):
+        idx = vertex_groups[c]
+        local = np.empty(len(v), dtype=np.int64)
+        local[idx] = np.arange(len(idx))
+        coarse = decimate(v[idx], local[f[face_groups[c]]], int(goal[c]))
+        places = locate_points(coarse, v[idx])
+        face[idx], bary[idx] = add(coarse) + places.face, places.bary
+    proxy = Mesh(np.concatenate([p.vertices for p in pieces]), np.concatenate([p.faces for p in pieces]))
+    alone = np.flatnonzero(face < 0)
+    if len(alone):
+        places = locate_points(proxy, v[alone])
+        face[alone], bary[alone] = places.face, places.bary
+    return Proxy(proxy, face, bary)
 
 
 def decimate(vertices: np.ndarray, faces: np.ndarray, target_vertices: int) -> Mesh:
