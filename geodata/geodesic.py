@@ -40,13 +40,15 @@ def exact_memory_estimate(n_vertices: int) -> int:
 def available_memory() -> int:
     """Bytes this process may still allocate: its RLIMIT_DATA less its data segment (``run_isolated``
     under --max-memory sets it) where set; else the least of the cgroup's memory limit and the
-    machine's MemAvailable."""
-    import resource
-
+    machine's MemAvailable (on Windows, without rlimits or /proc: no limit known)."""
     from geodata.parallel import _cgroup_memory
 
-    soft = resource.getrlimit(resource.RLIMIT_DATA)[0]
-    if soft != resource.RLIM_INFINITY:
+    try:
+        import resource
+    except ImportError:  # Windows
+        resource = None
+    soft = resource.getrlimit(resource.RLIMIT_DATA)[0] if resource else None
+    if resource and soft != resource.RLIM_INFINITY:
         return max(0, soft - _status_kib("VmData:", "/proc/self/status") * 1024)
     limits = [m for m in (_cgroup_memory(), _status_kib("MemAvailable:", "/proc/meminfo") * 1024) if m]
     return min(limits) if limits else 1 << 62

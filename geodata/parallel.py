@@ -16,7 +16,6 @@ import hashlib
 import io
 import os
 import pickle
-import resource
 import select
 import signal
 import sys
@@ -115,6 +114,8 @@ def _child(fn, args, write_fd: int, max_memory: int | None) -> None:
     try:
         out_of_memory = "out of memory"
         if max_memory is not None:
+            import resource  # Unix only, as os.fork: a platform without fork never gets here
+
             hard = resource.getrlimit(resource.RLIMIT_DATA)[1]
             limit = max_memory if hard == resource.RLIM_INFINITY else min(max_memory, hard)
             with contextlib.suppress(ValueError, OSError):  # a platform that refuses it: the mesh runs unlimited

@@ -2,6 +2,7 @@ import os
 import signal
 import subprocess
 import sys
+import textwrap
 import time
 
 import numpy as np
@@ -235,3 +236,27 @@ def test_memory_sizes_read_as_a_user_writes_them():
     for bad in ("4X", "lots", "-1G"):
         with pytest.raises(ValueError):
             parse_memory(bad)
+
+
+def test_without_fork_and_resource_as_on_windows_both_programs_import_and_a_mesh_is_solved():
+    """Windows has neither the ``resource`` module nor ``os.fork``: both command lines import, a task runs in
+    the caller (no isolation, as README says), and the exact solver's memory check finds no limit to apply."""
+    script = textwrap.dedent("""
+        import os, sys
+        sys.modules["resource"] = None  # import resource raises ImportError, as on Windows
+        del os.fork
+        from geodata.cli import main as geodata_main
+        from gegnn.cli import main as gegnn_main
+        import numpy as np, trimesh
+        from geodata.geodesic import available_memory, geodesic_solver
+        from geodata.mesh import Mesh
+        from geodata.parallel import run_isolated
+        assert available_memory() > 0
+        sphere = trimesh.creation.icosphere(2)
+        mesh = Mesh(np.asarray(sphere.vertices), np.asarray(sphere.faces))
+        d = run_isolated(lambda: geodesic_solver(mesh)(0), max_memory=1 << 30)
+        assert d.shape == (len(mesh.vertices),) and d[0] == 0 and 3.0 < d.max() < 3.2
+        print("ok")
+    """)
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr[-2000:]
