@@ -9,19 +9,30 @@ from geodata import store
 __all__ = ["read_attrs", "fates"]
 
 
-def read_attrs(out, meshes: dict) -> dict[str, dict]:
-    """Every published mesh's attributes (a few threads: each is one small read from its zip)."""
+def read_attrs(out, meshes: dict, damaged: dict | None = None) -> dict[str, dict]:
+    """Every published mesh's attributes (a few threads: each is one small read from its zip); a damaged zip's
+    id goes to ``damaged`` with the reason instead."""
     from concurrent.futures import ThreadPoolExecutor
 
+    def attrs(mesh_id):
+        try:
+            return store.mesh_attrs(out, mesh_id)
+        except store.DamagedMeshError as exc:
+            return exc
+
     with ThreadPoolExecutor(8) as pool:
-        found = dict(zip(meshes, pool.map(lambda m: store.mesh_attrs(out, m), meshes)))
-    return {k: a for k, a in found.items() if a is not None}
+        found = dict(zip(meshes, pool.map(attrs, meshes)))
+    if damaged is not None:
+        damaged.update({k: a.reason for k, a in found.items() if isinstance(a, store.DamagedMeshError)})
+    return {k: a for k, a in found.items() if isinstance(a, dict)}
 
 
-def fates(ledgers: dict, meshes: dict, attrs: dict, failures: dict) -> list[dict]:
+def fates(ledgers: dict, meshes: dict, attrs: dict, failures: dict, damaged: dict | None = None) -> list[dict]:
     """The fate of every input file in the runs' ledgers: ok (the source its published mesh records),
     duplicate (a byte copy of the same file name: the mesh records another source), failed (the mesh's
-    failure record), pending. A byte copy under another file name is a mesh of its own: its detail says so."""
+    failure record), damaged (its mesh's zip cannot be read: a rerun redoes it), pending. A byte copy under
+    another file name is a mesh of its own: its detail says so."""
+    damaged = damaged or {}
     published_as = defaultdict(set)  # byte copies under another file name are meshes of their own
     for entry in ledgers.values():
         if entry["mesh_id"] in meshes:
@@ -30,7 +41,9 @@ def fates(ledgers: dict, meshes: dict, attrs: dict, failures: dict) -> list[dict
     for (root, source), entry in sorted(ledgers.items(), key=lambda kv: kv[0][1]):
         mesh_id = entry["mesh_id"]
         row = {"source": source, "sha256": entry["sha256"], "mesh_id": mesh_id, "fate": "pending", "detail": ""}
-        if mesh_id in meshes:
+        if mesh_id in damaged:
+            row.update(fate="damaged", detail=f"{damaged[mesh_id]}: a rerun of prepare redoes it")
+        elif mesh_id in meshes:
             owner = attrs.get(mesh_id, {}).get("source")
             if owner != source:
                 row.update(fate="duplicate", detail=f"duplicate of {mesh_id} ({owner})")

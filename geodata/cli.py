@@ -182,11 +182,15 @@ def prepare(raw_dir, out, pairs, target_vertices, collapse, seed, geodesic_backe
     pending_now = plan.pending()
     tasks = plan.pending(retry_failed)
     where = "" if shard == (0, 1) else f" (shard {shard[0]}/{shard[1]})"
+    damaged = f" ({len(plan.damaged)} damaged: redone by a run)" if plan.damaged else ""
     counts = (f"{len(plan.ledger['inputs'])} input files, {len(plan.tasks)} distinct, {len(plan.published)} "
-              f"published, {len(plan.failed - plan.published)} failed, {len(pending_now)} pending{where}")
+              f"published, {len(plan.failed - plan.published)} failed, {len(pending_now)} pending{damaged}{where}")
     if check:
         _exit_check(f"prepare {raw_dir} -> {out}: {counts}", len(pending_now))
     store.write_ledger(out, plan.ledger_name, plan.ledger)  # every input accounted for before any work
+    for mesh_id, reason in plan.damaged.items():
+        if store.remove_damaged(out, mesh_id):
+            log.warning("damaged %s (%s): removed, to be prepared again", mesh_id, reason)
     log.info("prepare %s -> %s: %s; %d to do", raw_dir, out, counts, len(tasks))
     rows = _run(partial(process_task, out=out, config=config), tasks, "prepare", jobs, backend, scheduler)
     _summary(rows, len(plan.published), 0 if retry_failed else len(plan.failed - plan.published))
@@ -395,7 +399,7 @@ def examples(out_dir):
 @click.argument("out", type=click.Path(exists=True))
 @click.option("--csv", "csv_file", type=click.Path(dir_okay=False, allow_dash=True), default=None,
               help="Also write one row per input file: source, sha256, mesh_id, fate (ok, duplicate, failed, "
-                   "pending), detail (the mesh it duplicates, or the failed stage and reason); '-': the table "
+                   "pending, damaged), detail (the mesh it duplicates, or the failed stage and reason); '-': the table "
                    "alone, on stdout.")
 def info(out, csv_file):
     """Inputs and their fates, counts, failures, sizes and stage timings of store OUT.
@@ -411,8 +415,9 @@ def info(out, csv_file):
         raise click.ClickException(str(exc)) from None
     meshes = store.list_meshes(out)
     failures = store.list_failures(out)
-    attrs = read_attrs(out, meshes)
-    inputs = fates(store.read_ledgers(out), meshes, attrs, failures)
+    damaged: dict[str, str] = {}
+    attrs = read_attrs(out, meshes, damaged)
+    inputs = fates(store.read_ledgers(out), meshes, attrs, failures, damaged)
     if csv_file == "-":  # the table alone, for a pipe
         _write_csv(csv_file, inputs)
         return
@@ -424,7 +429,8 @@ def info(out, csv_file):
     mesh_failures = {k: a for k, a in failures.items() if not k.endswith(tuple(f".{s}" for s in store.SUBGROUPS))}
     click.echo(f"store {out}  (format {root.attrs['geodata_format']}, params {root.attrs.get('params')})")
     click.echo(f"inputs: {len(inputs)} files: {by_fate['ok']} ok, {by_fate['duplicate']} duplicate, "
-               f"{by_fate['failed']} failed, {by_fate['pending']} pending")
+               f"{by_fate['failed']} failed, {by_fate['pending']} pending"
+               + (f", {by_fate['damaged']} damaged" if by_fate["damaged"] else ""))
     click.echo(f"meshes: {len(meshes)} published, {len(mesh_failures)} failed; "
                + ", ".join(f"{sub}: {subs[sub]} ok, {sub_failed[sub]} failed" for sub in store.SUBGROUPS))
     if attrs:
@@ -438,6 +444,8 @@ def info(out, csv_file):
     if leftovers:
         click.echo(f"temporary files in meshes/: {len(leftovers)} (writers at work, or killed runs' leftovers: "
                    f"safe to delete while no run writes this store)")
+    for mesh_id, reason in sorted(damaged.items()):
+        click.echo(f"damaged: {mesh_id}  {reason} (left out of training; a rerun of geodata prepare redoes it)")
     noted = {a.get("source"): a["warnings"] for a in attrs.values() if a.get("warnings")}
     if noted:
         click.echo("ok, with warnings:")

@@ -12,7 +12,7 @@ import json
 import os
 import re
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import NamedTuple
 
@@ -289,13 +289,14 @@ class ShardPlan:
     tasks: list[MeshTask]      # one per distinct content among the shard's files
     ledger: dict               # sources/<ledger_name>.json: every file of the shard -> sha256, mesh id
     ledger_name: str
-    published: set[str]        # ids among ``tasks`` already in the store
+    published: set[str]        # ids among ``tasks`` already in the store, whole
     failed: set[str]           # ids among ``tasks`` with a failure record
+    damaged: dict[str, str] = field(default_factory=dict)  # ids among ``tasks`` whose zip is damaged: the reason
 
     def pending(self, retry_failed: bool = False) -> list[MeshTask]:
-        """The tasks still to do (with ``retry_failed``, the failed ones too)."""
+        """The tasks still to do (with ``retry_failed``, the failed ones too); a damaged mesh is to do again."""
         return [t for t in self.tasks if t.mesh_id not in self.published
-                and (retry_failed or t.mesh_id not in self.failed)]
+                and (retry_failed or t.mesh_id not in self.failed or t.mesh_id in self.damaged)]
 
 
 def ledger_name(raw_dir: str | Path, shard: tuple[int, int], include: set[str] | None,
@@ -317,7 +318,8 @@ def plan_shard(raw_dir: str | Path, out: str, shard: tuple[int, int], include: s
     tasks, entries = make_tasks(raw_dir, [s for s in discover(raw_dir, include, exclude) if in_shard(s, shard)],
                                 known)
     ids = {t.mesh_id for t in tasks}
-    published = {m for m in ids if store.mesh_file(out, m).is_file()}
+    found = {m for m in ids if store.mesh_file(out, m).is_file()}
+    damaged = {m: reason for m in found if (reason := store.damage(out, m))}  # one small read of each: its end
     ledger = {"root": str(raw_root(raw_dir).resolve()), "shard": f"{shard[0]}/{shard[1]}", "written": time.time(),
               "inputs": entries}
-    return ShardPlan(tasks, ledger, name, published, set(store.list_failures(out, ids)))
+    return ShardPlan(tasks, ledger, name, found - set(damaged), set(store.list_failures(out, ids)), damaged)

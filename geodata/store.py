@@ -23,14 +23,15 @@ import json
 import os
 import socket
 import time
+import zipfile
 from pathlib import Path
 
 import numpy as np
 import zarr
 
-__all__ = ["StoreError", "FORMAT", "SUBGROUPS", "create_store", "open_store", "geometry_key", "mesh_file", "publish", "write_mesh",
+__all__ = ["StoreError", "DamagedMeshError", "FORMAT", "SUBGROUPS", "create_store", "open_store", "geometry_key", "mesh_file", "publish", "write_mesh",
            "read_mesh", "mesh_attrs", "list_meshes", "record_failure", "clear_failure", "list_failures",
-           "write_ledger", "read_ledgers", "temporary_files"]
+           "write_ledger", "read_ledgers", "temporary_files", "damage", "remove_damaged"]
 
 FORMAT = 2  # 1: one zarr group per mesh (~14-20 files a mesh), before 2026-11-26
 SUBGROUPS = ("biharmonic", "points")
@@ -38,6 +39,16 @@ SUBGROUPS = ("biharmonic", "points")
 
 class StoreError(Exception):
     """The store path is missing or is not a geodata store of this format."""
+
+
+class DamagedMeshError(StoreError):
+    """A published zip that cannot be read whole (empty, truncated, not a zarr group): e.g. a node that crashed
+    while its file was still in the page cache. A rerun of the stage that wrote it redoes it."""
+
+    def __init__(self, path: Path, reason: str):
+        self.path, self.reason = Path(path), reason
+        super().__init__(f"{path}: damaged ({reason}); rerun the stage that wrote it (geodata prepare, biharmonic "
+                         f"or points: it replaces a damaged file)")
 
 
 def _check_format(out: str, root: zarr.Group) -> None:
@@ -136,7 +147,7 @@ def write_mesh(out: str | Path, mesh_id: str, arrays: dict[str, np.ndarray], att
     """Write meshes/<mesh_id>[.<subgroup>].zip holding ``arrays`` (names may contain '/') and ``attrs``
     (with status "ok"), then publish it; False (nothing changed) when another writer published it first."""
     final = mesh_file(out, mesh_id, subgroup)
-    tmp = final.with_name(f".{final.name}.{socket.gethostname()}.{os.getpid()}.tmp")
+    tmp = temporary_name(final)
     zip_store = zarr.storage.ZipStore(tmp, mode="w")
     try:
         group = zarr.open_group(zip_store, mode="w", attributes={**attrs, "status": "ok"})
@@ -144,7 +155,19 @@ def write_mesh(out: str | Path, mesh_id: str, arrays: dict[str, np.ndarray], att
             group.create_array(name, data=np.ascontiguousarray(data), chunks=_chunks(data))
     finally:
         zip_store.close()
+    _flush_to_disk(tmp)  # else a node crash can leave the published name on an empty or partial file
     return publish(tmp, final)
+
+
+def _flush_to_disk(path: Path) -> None:
+    with open(path, "rb") as f:
+        os.fsync(f.fileno())
+
+
+def temporary_name(final: Path) -> Path:
+    """A writer's temporary file for ``final``, in its folder: ``.<name>.<host>.<pid>.<random>.tmp``, unique
+    also among containers that share a hostname and a pid namespace's numbers."""
+    return final.with_name(f".{final.name}.{socket.gethostname()}.{os.getpid()}.{os.urandom(4).hex()}.tmp")
 
 
 @contextlib.contextmanager
@@ -154,15 +177,66 @@ def read_mesh(out: str | Path, mesh_id: str, subgroup: str | None = None):
     path = mesh_file(out, mesh_id, subgroup)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such mesh")
+    reason = damage(out, mesh_id, subgroup)
+    if reason:
+        raise DamagedMeshError(path, reason)
     zip_store = zarr.storage.ZipStore(path, mode="r")
     try:
-        yield zarr.open_group(zip_store, mode="r")
+        try:
+            group = zarr.open_group(zip_store, mode="r")
+        except (zarr.errors.GroupNotFoundError, FileNotFoundError, KeyError, ValueError,
+                zipfile.BadZipFile) as exc:
+            raise DamagedMeshError(path, f"not a zarr group: {exc}") from None
+        yield group
     finally:
-        zip_store.close()
+        if hasattr(zip_store, "_zf"):  # else it never opened: its close() would hide why (AttributeError)
+            zip_store.close()
+
+
+def damage(out: str | Path, mesh_id: str, subgroup: str | None = None, thorough: bool = False) -> str | None:
+    """Why a published zip is damaged, or None where it looks whole (also where it is not published). Quick by
+    default: the zip's directory, read from its end, must list the group (an empty, truncated or zero-filled
+    file fails). ``thorough``: every member's CRC is checked and the group's ``status`` must be "ok"."""
+    path = mesh_file(out, mesh_id, subgroup)
+    try:
+        if path.stat().st_size == 0:
+            return "empty file"
+        with zipfile.ZipFile(path) as zf:
+            if "zarr.json" not in zf.namelist():
+                return "no zarr group in the zip"
+            if thorough:
+                bad = zf.testzip()
+                if bad is not None:
+                    return f"{bad}: CRC mismatch"
+                status = json.loads(zf.read("zarr.json")).get("attributes", {}).get("status")
+                if status != "ok":
+                    return f"status {status!r}, not 'ok'"
+    except FileNotFoundError:
+        return None
+    except (zipfile.BadZipFile, zipfile.LargeZipFile, EOFError, OSError, ValueError) as exc:
+        return f"not a readable zip: {one_line_error(exc)}"
+    return None
+
+
+def one_line_error(exc: BaseException) -> str:
+    return " ".join(str(exc).split()) or type(exc).__name__
+
+
+def remove_damaged(out: str | Path, mesh_id: str, subgroup: str | None = None) -> bool:
+    """Delete a published zip found damaged (:func:`damage`), so that the stage can publish it again; True when
+    this call removed it. A whole file is never removed: it is checked again just before."""
+    path = mesh_file(out, mesh_id, subgroup)
+    if damage(out, mesh_id, subgroup) is None:
+        return False
+    with contextlib.suppress(FileNotFoundError):
+        path.unlink()
+        return True
+    return False
 
 
 def mesh_attrs(out: str | Path, mesh_id: str, subgroup: str | None = None) -> dict | None:
-    """A published mesh's (or subgroup's) attributes, or None where it is not published."""
+    """A published mesh's (or subgroup's) attributes, or None where it is not published; DamagedMeshError
+    where its zip is damaged."""
     try:
         with read_mesh(out, mesh_id, subgroup) as group:
             return dict(group.attrs)
@@ -233,8 +307,11 @@ def write_ledger(out: str | Path, name: str, ledger: dict) -> None:
     """Publish sources/<name>.json (a prepare run's inputs: see :func:`read_ledgers`), replacing the same
     run's earlier one atomically."""
     final = Path(out) / "sources" / f"{name}.json"
-    tmp = final.with_name(f".{final.name}.{socket.gethostname()}.{os.getpid()}.tmp")
-    tmp.write_text(json.dumps(ledger))
+    tmp = temporary_name(final)
+    with open(tmp, "w") as f:
+        f.write(json.dumps(ledger))
+        f.flush()
+        os.fsync(f.fileno())
     os.replace(tmp, final)
 
 

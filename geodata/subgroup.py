@@ -14,13 +14,15 @@ __all__ = ["pending", "run_subgroup"]
 
 def pending(out, subgroup: str, keep=None, retry_failed: bool = False) -> tuple[list[str], int, int]:
     """The published meshes (those ``keep(mesh_id)`` accepts: a shard) whose ``subgroup`` is still to do, in id
-    order; and how many are done and failed. One listing of meshes/, then only this shard's failure records:
-    no mesh's file is opened."""
+    order (a damaged one too: :func:`geodata.store.damage`); and how many are done and failed. One listing of
+    meshes/, then only this shard's failure records and the directory of its published subgroup zips: no mesh
+    is opened."""
     meshes = store.list_meshes(out)
     mine = [m for m in meshes if keep is None or keep(m)]
     failed = {name.rsplit(".", 1)[0] for name in store.list_failures(out, {f"{m}.{subgroup}" for m in mine})}
-    done = [m for m in mine if subgroup in meshes[m]]
-    todo = [m for m in mine if subgroup not in meshes[m] and (retry_failed or m not in failed)]
+    damaged = {m for m in mine if subgroup in meshes[m] and store.damage(out, m, subgroup)}  # redone
+    done = [m for m in mine if subgroup in meshes[m] and m not in damaged]
+    todo = [m for m in mine if (subgroup not in meshes[m] or m in damaged) and (retry_failed or m not in failed)]
     return todo, len(done), 0 if retry_failed else len(failed - set(done))
 
 
@@ -40,6 +42,7 @@ def run_subgroup(mesh_id: str, out: str, subgroup: str, compute, config, attrs: 
         store.record_failure(out, name, source, exc.stage, exc.reason)
         return {**row, "status": "failed", "stage": exc.stage, "error": exc.reason,
                 "seconds": time.perf_counter() - start}
+    store.remove_damaged(out, mesh_id, subgroup)  # a damaged one is replaced; a whole one never
     store.write_mesh(out, mesh_id, arrays, {**attrs, "seconds": round(seconds, 4)}, subgroup)
     store.clear_failure(out, name)
     return {**row, "status": "ok", "timings": {subgroup: seconds}, "seconds": time.perf_counter() - start}

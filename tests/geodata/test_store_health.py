@@ -1,0 +1,101 @@
+"""Nothing stale, nothing lost, no wrong answer (issue 56): a damaged zip is found and redone, an input edited
+in place is hashed again, a mesh no input maps to any more is an orphan left out of training, an upgraded store
+is extended without duplicates, and `geodata verify` names every such entry."""
+import csv
+import io
+import os
+
+import numpy as np
+import pytest
+import trimesh
+from click.testing import CliRunner
+
+from geodata import store
+from geodata.cli import main
+
+ARGS = ["--pairs", "300", "--target-vertices", "150"]
+
+
+def ball_obj(z_scale: float = 1.0) -> bytes:
+    """An icosphere squashed along z by ``z_scale``, its numbers fixed-width: every such file has the same size."""
+    sphere = trimesh.creation.icosphere(1)
+    lines = [f"v {x:+.6f} {y:+.6f} {z * z_scale:+.6f}" for x, y, z in sphere.vertices]
+    lines += [f"f {a + 1:3d} {b + 1:3d} {c + 1:3d}" for a, b, c in sphere.faces]
+    return ("\n".join(lines) + "\n").encode()
+
+
+def run(*args, code=0):
+    result = CliRunner().invoke(main, [str(a) for a in args])
+    assert result.exit_code == code, result.output
+    return result
+
+
+def prepared(tmp_path, files=None):
+    raw, out = tmp_path / "raw", tmp_path / "out.zarr"
+    raw.mkdir()
+    for name, data in (files or {"ball.obj": ball_obj()}).items():
+        (raw / name).write_bytes(data)
+    run("prepare", raw, out, *ARGS)
+    return raw, out
+
+
+def csv_rows(out) -> list[dict]:
+    return list(csv.DictReader(io.StringIO(run("info", out, "--csv", "-").output)))
+
+
+@pytest.mark.parametrize("damage", ["empty", "truncated", "no group"])
+def test_a_damaged_zip_is_reported_by_name_and_redone(tmp_path, damage):
+    """A node crash can publish an empty or partial zip: prepare --check, info and readers name it, a rerun
+    redoes it."""
+    raw, out = prepared(tmp_path)
+    (mesh_id,) = store.list_meshes(out)
+    path = store.mesh_file(out, mesh_id)
+    good = path.read_bytes()
+    path.unlink()
+    if damage == "empty":
+        path.write_bytes(b"")
+    elif damage == "truncated":
+        path.write_bytes(good[:len(good) // 2])
+    else:
+        import zipfile
+
+        with zipfile.ZipFile(path, "w") as z:
+            z.writestr("vertices/zarr.json", "{}")
+    check = run("prepare", raw, out, *ARGS, "--check", code=3)
+    assert "1 damaged" in check.output
+    info = run("info", out)
+    assert f"damaged: {mesh_id}" in info.output and "rerun" in info.output
+    assert [r["fate"] for r in csv_rows(out)] == ["damaged"]
+    with pytest.raises(store.DamagedMeshError, match=mesh_id):
+        with store.read_mesh(out, mesh_id):
+            pass
+    with pytest.raises(store.DamagedMeshError, match=mesh_id):
+        store.mesh_attrs(out, mesh_id)
+    run("prepare", raw, out, *ARGS)
+    assert store.mesh_attrs(out, mesh_id)["status"] == "ok"
+    assert [r["fate"] for r in csv_rows(out)] == ["ok"]
+    run("prepare", raw, out, *ARGS, "--check")
+
+
+def test_a_zip_is_on_disk_before_it_is_published(tmp_path, monkeypatch):
+    """write_mesh flushes the zip to disk (fsync) before linking it: a crash then publishes nothing or all."""
+    events, real_fsync, real_link = [], os.fsync, os.link
+    monkeypatch.setattr(os, "fsync", lambda fd: events.append(("fsync", os.readlink(f"/proc/self/fd/{fd}")))
+                        or real_fsync(fd))
+    monkeypatch.setattr(os, "link", lambda src, dst: events.append(("link", str(src))) or real_link(src, dst))
+    store.create_store(tmp_path, {})
+    store.write_mesh(tmp_path, "m", {"vertices": np.zeros((3, 3), np.float32)}, {})
+    link = events.index(next(e for e in events if e[0] == "link"))
+    assert ("fsync", events[link][1]) in events[:link]
+
+
+def test_a_damaged_subgroup_zip_is_to_do_again(tmp_path):
+    from geodata.subgroup import pending
+
+    store.create_store(tmp_path, {})
+    for mesh_id in ("a", "b"):
+        store.write_mesh(tmp_path, mesh_id, {"vertices": np.zeros((3, 3), np.float32)}, {})
+        store.write_mesh(tmp_path, mesh_id, {"pairs": np.zeros((1, 2), np.uint32)}, {}, "biharmonic")
+    store.mesh_file(tmp_path, "b", "biharmonic").write_bytes(b"")
+    assert pending(tmp_path, "biharmonic") == (["b"], 1, 0)
+    assert store.remove_damaged(tmp_path, "b", "biharmonic") and not store.remove_damaged(tmp_path, "a", "biharmonic")
