@@ -148,13 +148,17 @@ def main():
               help="Then add N surface points per mesh with exact distances between them, --pairs of them "
                    "(the data of point-cloud models: as `geodata points OUT --points N`).")
 @click.option("--retry-failed", is_flag=True, help="Try again the meshes recorded under failed/.")
+@click.option("--rehash", is_flag=True,
+              help="Read and hash every input file again instead of trusting the ledger where a file's size, "
+                   "times and inode are unchanged (after a change no file time shows: a filesystem that does "
+                   "not keep ctime, a restored disk image).")
 @click.option("--strict", is_flag=True, help="Exit with status 1 when any mesh of this run failed (default: 0, "
                                              "a batch that recorded its failures did its job).")
 @CHECK_OPTION
 @_list_options
 @_scale_options
 def prepare(raw_dir, out, pairs, target_vertices, collapse, seed, geodesic_backend, timeout, n_points, retry_failed,
-            strict, check, include, exclude, jobs, backend, scheduler, shard, log_file, max_memory):
+            rehash, strict, check, include, exclude, jobs, backend, scheduler, shard, log_file, max_memory):
     """Prepare every mesh file under RAW_DIR (OBJ/OFF/PLY/STL/GLB, searched recursively) into store OUT.
 
     Stages: load, watertight (manifold3d), isotropic remesh (pymeshlab), QEM edge collapse,
@@ -178,7 +182,7 @@ def prepare(raw_dir, out, pairs, target_vertices, collapse, seed, geodesic_backe
         raise click.ClickException(str(exc)) from None
     except OSError as exc:  # a parent that is a file, no permission, a full disk...
         raise click.ClickException(f"{out}: cannot create the store: {exc.strerror or exc}") from None
-    plan = plan_shard(raw_dir, out, shard, include, exclude)
+    plan = plan_shard(raw_dir, out, shard, include, exclude, rehash)
     pending_now = plan.pending()
     tasks = plan.pending(retry_failed)
     where = "" if shard == (0, 1) else f" (shard {shard[0]}/{shard[1]})"

@@ -97,27 +97,52 @@ def mesh_id_of(source: str, digest: str) -> str:
     return f"{stem[:40]}-{digest[:ID_DIGITS]}"
 
 
+STAT_KEYS = ("size", "mtime_ns", "ctime_ns", "inode")  # a ledger's hash is reused only where all four are unchanged
+
+
+def file_stat(stat: os.stat_result) -> dict:
+    """What a ledger keeps of a file's stat: a rewrite changes its ctime (no tool sets it back: `cp -p`, `touch -r`
+    and `rsync -t` keep the size and mtime, never the ctime) and a replacement its inode."""
+    return {"size": stat.st_size, "mtime_ns": stat.st_mtime_ns, "ctime_ns": stat.st_ctime_ns, "inode": stat.st_ino}
+
+
+COARSE_TICK_NS = 2_000_000_000  # the clock of filesystems that keep whole seconds (ext3, FAT, some NFS servers)
+
+
+def racy(entry: dict) -> bool:
+    """Whether a ledger entry's file changed so shortly before it was hashed that a later change could leave its
+    ctime the same, on a filesystem whose times are whole seconds: its hash is not reused (git's "racily clean"
+    entries). Where times have nanoseconds the tick is the kernel's (a few ms): not guarded (docs/store.md)."""
+    coarse = entry["ctime_ns"] % 1_000_000_000 == 0
+    return coarse and entry["ctime_ns"] + COARSE_TICK_NS >= entry.get("checked_ns", 0)
+
+
+def reusable_hash(old: dict | None, stat: dict) -> str | None:
+    """An earlier ledger entry's hash where the file is unchanged by every sign its stat gives, else None."""
+    if not old or not old.get("sha256") or any(old.get(k) != stat[k] for k in STAT_KEYS) or racy(old):
+        return None
+    return old["sha256"]
+
+
 def make_tasks(raw_dir: str | Path, sources: list[str], known: dict | None = None) -> tuple[list[MeshTask], dict]:
     """One task per distinct mesh id among ``sources`` (byte copies of one file name are one task, under the first
-    path), and the
-    ledger entry of every source: {sha256, mesh_id, size, mtime_ns}. ``known``: an earlier ledger's entries,
-    whose hash is reused where a file's size and modification time are unchanged (a rerun reads no file
-    again). A file that cannot be read is a task with its reason in ``error``."""
+    path), and the ledger entry of every source: {sha256, mesh_id, size, mtime_ns, ctime_ns, inode, checked_ns}.
+    ``known``: an earlier ledger's entries, whose hash is reused where a file's size, times and inode are
+    unchanged (a rerun reads no such file again: :func:`reusable_hash`). A file that cannot be read is a task
+    with its reason in ``error``."""
     base = raw_root(raw_dir)
     tasks: dict[str, MeshTask] = {}
     entries = {}
     for source in sources:
         path = base / source
         try:
-            stat = path.stat()
-            old = (known or {}).get(source)
-            if old and (old["size"], old["mtime_ns"]) == (stat.st_size, stat.st_mtime_ns) and old["sha256"]:
-                digest = old["sha256"]
-            else:
+            checked = time.time_ns()
+            stat = file_stat(path.stat())
+            digest = reusable_hash((known or {}).get(source), stat)
+            if digest is None:
                 digest = hashlib.sha256(path.read_bytes()).hexdigest()
             task = MeshTask(str(path.resolve()), source, mesh_id_of(source, digest), digest)
-            entries[source] = {"sha256": digest, "mesh_id": task.mesh_id, "size": stat.st_size,
-                               "mtime_ns": stat.st_mtime_ns}
+            entries[source] = {"sha256": digest, "mesh_id": task.mesh_id, **stat, "checked_ns": checked}
         except OSError as exc:  # permissions, a broken link, a file removed since the listing
             unreadable = mesh_id_of(source, hashlib.sha256(f"unreadable:{source}".encode()).hexdigest())
             task = MeshTask(str(path), source, unreadable, None, f"cannot read the file: {exc.strerror or exc}")
@@ -308,13 +333,13 @@ def ledger_name(raw_dir: str | Path, shard: tuple[int, int], include: set[str] |
 
 
 def plan_shard(raw_dir: str | Path, out: str, shard: tuple[int, int], include: set[str] | None = None,
-               exclude: set[str] | None = None) -> ShardPlan:
-    """This shard's files (hashed, or their hash taken from the shard's last ledger where unchanged) and
-    the state of their meshes, from the shard's own files and records alone: its cost does not grow with the
-    store."""
+               exclude: set[str] | None = None, rehash: bool = False) -> ShardPlan:
+    """This shard's files (hashed, or their hash taken from the shard's last ledger where unchanged; with
+    ``rehash`` every file is hashed) and the state of their meshes, from the shard's own files and records
+    alone: its cost does not grow with the store."""
     name, known = ledger_name(raw_dir, shard, include, exclude), None
     with contextlib.suppress(FileNotFoundError, json.JSONDecodeError, KeyError):
-        known = json.loads((Path(out) / "sources" / f"{name}.json").read_text())["inputs"]
+        known = None if rehash else json.loads((Path(out) / "sources" / f"{name}.json").read_text())["inputs"]
     tasks, entries = make_tasks(raw_dir, [s for s in discover(raw_dir, include, exclude) if in_shard(s, shard)],
                                 known)
     ids = {t.mesh_id for t in tasks}

@@ -99,3 +99,52 @@ def test_a_damaged_subgroup_zip_is_to_do_again(tmp_path):
     store.mesh_file(tmp_path, "b", "biharmonic").write_bytes(b"")
     assert pending(tmp_path, "biharmonic") == (["b"], 1, 0)
     assert store.remove_damaged(tmp_path, "b", "biharmonic") and not store.remove_damaged(tmp_path, "a", "biharmonic")
+
+
+def test_an_input_rewritten_in_place_with_its_size_and_mtime_is_hashed_again(tmp_path):
+    """A generated OBJ keeps its size, `cp -p`/`touch -r`/`rsync -t` its mtime: the rerun still sees the new bytes
+    (the file's ctime and inode changed), prepares them and records their hash."""
+    import hashlib
+
+    raw, out = prepared(tmp_path)
+    ball = raw / "ball.obj"
+    before, ellipsoid = ball.stat(), ball_obj(0.5)
+    assert len(ellipsoid) == before.st_size
+    ball.write_bytes(ellipsoid)
+    os.utime(ball, ns=(before.st_atime_ns, before.st_mtime_ns))
+    assert ball.stat().st_mtime_ns == before.st_mtime_ns
+    result = run("prepare", raw, out, *ARGS)
+    assert "1 to do" in result.output
+    rows = [r for r in csv_rows(out) if r["source"] == "ball.obj"]
+    assert [r["sha256"] for r in rows] == [hashlib.sha256(ellipsoid).hexdigest()]
+    with store.read_mesh(out, rows[0]["mesh_id"]) as g:
+        extent = np.ptp(g["vertices"][:], axis=0)
+    assert extent[2] < 0.7 * extent[0]  # the ellipsoid, not the sphere
+
+
+def test_rehash_reads_every_file_again(tmp_path):
+    """--rehash: no hash is taken from the ledger (for a change no file time shows)."""
+    import hashlib
+    import json
+
+    raw, out = prepared(tmp_path)
+    (ledger,) = (out / "sources").glob("*.json")
+    content = json.loads(ledger.read_text())
+    right = content["inputs"]["ball.obj"]["sha256"]
+    content["inputs"]["ball.obj"]["sha256"] = hashlib.sha256(b"stale").hexdigest()
+    ledger.write_text(json.dumps(content))
+    run("prepare", raw, out, *ARGS, "--rehash")
+    assert json.loads(ledger.read_text())["inputs"]["ball.obj"]["sha256"] == right
+
+
+def test_a_hash_taken_within_a_coarse_filesystem_tick_of_a_change_is_not_reused():
+    from geodata.prepare import reusable_hash
+
+    stat = {"size": 10, "mtime_ns": 5_000_000_000, "ctime_ns": 7_000_000_000, "inode": 3}
+    assert reusable_hash({**stat, "sha256": "ab", "checked_ns": 8_000_000_000}, stat) is None  # whole seconds
+    assert reusable_hash({**stat, "sha256": "ab", "checked_ns": 9_500_000_000}, stat) == "ab"
+    fine = {**stat, "ctime_ns": 7_000_000_123}
+    assert reusable_hash({**fine, "sha256": "ab", "checked_ns": 7_000_100_000}, fine) == "ab"
+    for key in stat:
+        assert reusable_hash({**fine, "sha256": "ab", "checked_ns": 9_500_000_000}, {**fine, key: 1}) is None
+    assert reusable_hash({"sha256": "ab", "size": 10, "mtime_ns": 5_000_000_000}, stat) is None  # an old ledger
