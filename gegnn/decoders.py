@@ -245,7 +245,7 @@ class LandmarkDecoder(PairDecoder):
             d = lower * t.clamp(max=MAX_LOG_RATIO).exp()
         else:
             d = lower + (upper - lower).clamp_min(0) * torch.sigmoid(t)
-        return torch.where(lower > 0, d, torch.zeros_like(d))
+        return torch.where(lower <= 0, torch.zeros_like(d), d)  # a NaN bound stays NaN, never 0
 
 
 class SpectralDecoder(PairDecoder):

@@ -76,7 +76,7 @@ GEGNN_INLINE void dense_relu(const float* x, int64_t ldx, int64_t rows, const fl
             }
             for (int r = 0; r < R; ++r)
                 for (int v = 0; v < NV; ++v) {
-                    const Vec t = acc[r][v] > 0 ? acc[r][v] : Vec{};
+                    const Vec t = acc[r][v] < 0 ? Vec{} : acc[r][v];  // NaN stays NaN, as torch's relu
                     std::memcpy(y + (r0 + r) * ldy + c0 + v * L, &t, sizeof(Vec));
                 }
         }

@@ -19,10 +19,10 @@
 #include <cstdint>
 #include <cstring>
 #include <stdexcept>
-#include <thread>
 #include <vector>
 
 #include "simd.h"
+#include "threads.h"
 
 namespace nb = nanobind;
 
@@ -118,14 +118,10 @@ bool max_messages(StridedRows h, StridedRows self, Rows pos, Index receiver, Ind
     const Edges edges{h.data(), self.data(), pos.data(), g ? w_geometry.data() : nullptr, r, s,
                       static_cast<int64_t>(h.stride(0)), static_cast<int64_t>(self.stride(0)), C, g, relative, length};
     const int64_t parts = std::max<int64_t>(1, std::min<int64_t>(threads, E / 4096));
-    std::vector<std::thread> pool;
-    auto part = [&](int64_t t) {
+    run_parts(parts, [&](int64_t t) {
         const int64_t v0 = n * t / parts, v1 = n * (t + 1) / parts;
         reduce_vertices(edges, first.data() + v0, v0, v1, out.data());
-    };
-    for (int64_t t = 1; t < parts; ++t) pool.emplace_back(part, t);
-    part(0);
-    for (auto& th : pool) th.join();
+    });
     return true;
 }
 

@@ -26,9 +26,10 @@
 #include <cstdint>
 #include <memory>
 #include <stdexcept>
-#include <thread>
 #include <utility>
 #include <vector>
+
+#include "threads.h"
 
 namespace nb = nanobind;
 
@@ -206,10 +207,7 @@ public:
                 }
             };
             const int64_t team = std::max<int64_t>(1, std::min<int64_t>(threads, static_cast<int64_t>(blocks.size())));
-            std::vector<std::thread> helpers;
-            for (int64_t t = 1; t < team; ++t) helpers.emplace_back(work);
-            work();
-            for (auto& h : helpers) h.join();
+            run_parts(team, [&](int64_t) { work(); });  // each takes blocks until none is left
         }
         return wrap(out, n_, s);
     }

@@ -23,11 +23,11 @@
 #include <cstring>
 #include <stdexcept>
 #include <string>
-#include <thread>
 #include <vector>
 
 #include "dense.h"
 #include "simd.h"
+#include "threads.h"
 
 namespace nb = nanobind;
 
@@ -82,6 +82,7 @@ GEGNN_INLINE void landmark_row(const float* a, const float* b, const Layout& L, 
         total += s;
         squares += s * s;
     }
+    if (std::isnan(total)) m = u = total;  // a NaN value: the max and min above may have skipped it, torch's do not
     lower = m;
     upper = u;
     const float uc = std::max(u, 1e-6f), inv = 1.0f / uc;
@@ -218,10 +219,7 @@ Layout landmark_layout(const Codes& codes, int64_t d, int64_t k, bool embedding,
 template <class Work>
 void split(int64_t n, int threads, Work work) {
     const int64_t parts = std::max<int64_t>(1, std::min<int64_t>(threads, n / 1024));
-    std::vector<std::thread> pool;
-    for (int64_t t = 1; t < parts; ++t) pool.emplace_back(work, n * t / parts, n * (t + 1) / parts);
-    work(int64_t{0}, n / parts);
-    for (auto& th : pool) th.join();
+    run_parts(parts, [&](int64_t t) { work(n * t / parts, n * (t + 1) / parts); });
 }
 
 void landmark_features(Codes codes, Index ia, Index ib, int64_t d, int64_t k, bool embedding, bool euclidean,

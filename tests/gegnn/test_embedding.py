@@ -105,6 +105,72 @@ def test_compiled_decode_equals_the_torch_module_on_each_instruction_set(isa, wh
     np.testing.assert_allclose(out, ref, rtol=1e-4, atol=1e-6 * np.abs(ref).max())
 
 
+@pytest.mark.parametrize("isa", ["avx2", "avx512"])
+@pytest.mark.parametrize("which", range(4))
+@pytest.mark.parametrize("column", ["embedding", "landmark"])
+def test_compiled_decode_keeps_a_nan_as_torch_does(isa, which, column, monkeypatch):
+    """One NaN in a code (a landmark field value, or an embedding value) gives NaN for every pair of that
+    vertex, on the torch path and the compiled one, never a number: the kernels' max and min skipped it (2.61),
+    and so did their relu; the landmark output mapped a NaN bound to 0 on both."""
+    from gegnn._pair_features import cpu_isa
+
+    if ISAS.index(isa) > ISAS.index(cpu_isa()):
+        pytest.skip(f"this CPU does not run {isa}")
+    dec = decoders_with_mlps()[which]
+    landmarks = isinstance(dec, LandmarkDecoder)
+    if column == "landmark" and not landmarks:
+        pytest.skip("the paper's decoder has no landmark fields")
+    codes = landmark_codes(n=400, k=dec.k) if landmarks else torch.randn(400, 29)
+    col = (dec.embed_dim + 3) if column == "landmark" else 2
+    if column == "embedding" and landmarks and not dec.embedding:
+        col = dec.k + 1  # no embedding columns: a vertex's norm term instead
+    codes[5, col] = float("nan")
+    rng = np.random.default_rng(which)
+    i, j = rng.integers(0, len(codes), 5003), rng.integers(0, len(codes), 5003)
+    i[:40] = 5
+    with torch.inference_mode():
+        ref = dec(codes[i], codes[j]).numpy()
+    ref[i == j] = 0
+    monkeypatch.setattr(decoders, "ISA", isa)
+    monkeypatch.setattr(torch, "get_num_threads", lambda: 3)
+    emb = Embedding(codes, dec, precision="fp32")
+    assert emb._fused
+    out = emb.distance(i, j)
+    touched = ((i == 5) | (j == 5)) & (i != j)
+    assert np.isnan(ref[touched]).all() and not np.isnan(ref[~touched]).any()
+    assert np.array_equal(np.isnan(out), np.isnan(ref))
+
+
+def test_threads_that_cannot_start_leave_their_work_to_the_caller():
+    """Under an address-space limit that leaves room for no thread stack, one, or two (as a cgroup's pids.max
+    would refuse threads), a compiled pass asked for 8 threads does the refused threads' parts itself: the
+    same features as on one thread. An exception out of std::thread's constructor with threads already
+    started had ended the process (std::terminate)."""
+    import subprocess
+    import sys
+    import textwrap
+
+    script = textwrap.dedent("""
+        import resource, sys, threading
+        import torch
+        from gegnn._pair_features import landmark_features
+        g = torch.Generator().manual_seed(0)
+        n, d, k = 400, 8, 21
+        codes = torch.cat([torch.randn(n, d, generator=g), torch.rand(n, k + 4, generator=g)], 1)
+        i, j = (torch.randint(0, n, (200_000,), generator=g) for _ in range(2))
+        out = [(torch.empty(len(i), d + 7), torch.empty(len(i)), torch.empty(len(i))) for _ in range(2)]
+        landmark_features(codes, i, j, d, k, True, True, *out[0], threads=1)
+        vm = int(next(l for l in open("/proc/self/status") if l.startswith("VmSize:")).split()[1]) * 1024
+        resource.setrlimit(resource.RLIMIT_AS, (vm + int(sys.argv[1]) * 2 ** 20, resource.RLIM_INFINITY))
+        landmark_features(codes, i, j, d, k, True, True, *out[1], threads=8)
+        resource.setrlimit(resource.RLIMIT_AS, (resource.RLIM_INFINITY, resource.RLIM_INFINITY))
+        print(all(torch.equal(a, b) for a, b in zip(*out)))
+    """)
+    for room in (4, 12, 20):  # MiB over what the process maps: a thread's stack is 8 MiB and a guard page
+        run = subprocess.run([sys.executable, "-c", script, str(room)], capture_output=True, text=True, timeout=120)
+        assert run.returncode == 0 and run.stdout.strip() == "True", (room, run.returncode, run.stderr[-1500:])
+
+
 def test_decode_takes_the_torch_path_where_the_compiled_one_does_not_apply():
     """bf16, a hidden width that is not a multiple of 32, or codes that carry gradients: no compiled decode."""
     codes = landmark_codes()
