@@ -336,6 +336,34 @@ def test_recover_refuses_to_guess_about_a_forgotten_training_job(tmp_path):
                        "run", "--epochs", "2", "--run-note=it's \"quoted\""]]
 
 
+@pytest.mark.parametrize("shell", SHELLS)
+def test_recover_submits_a_training_job_the_chain_never_got(tmp_path, shell):
+    """submit.sh's sbatch for training failed (a typo in --sbatch-train): the record has no training job, which
+    ended recover.sh in "bad array subscript". It says so and submits training behind the stage still
+    running; where that sbatch fails too (the data now complete), it names the flags to correct in the
+    record."""
+    skip_without(shell)
+    chain = chain_with_stand_ins(tmp_path, BLOCKED[:-1], {("prepare", 1): 3})
+    text = Path(chain).read_text()
+    Path(chain).write_text("".join(line for line in text.splitlines(True) if not line.startswith("train_jobs")))
+    run_env = {**os.environ, "PATH": f"{tmp_path / 'bin'}:{os.environ['PATH']}"}
+    proc = subprocess.run([shell, str(SLURM / "recover.sh"), chain], cwd=tmp_path, capture_output=True, text=True,
+                          env=run_env)
+    assert proc.returncode == 0, proc.stderr
+    assert "the chain's record has no training job" in proc.stderr
+    sbatch = [shlex.split(c) for c in (tmp_path / "calls.txt").read_text().splitlines() if c.startswith("sbatch")]
+    assert [c[2] for c in sbatch] == ["--array=1", "--nodes=2"]
+    assert "--dependency=afterok:101" in sbatch[1] and sbatch[1][-6:-4] == [str(SLURM / "train.sbatch"), "out"]
+    assert "train_jobs+=(104)" in Path(chain).read_text()
+    Path(chain).write_text("".join(line for line in Path(chain).read_text().splitlines(True)
+                                   if not line.startswith("train_jobs")))
+    (tmp_path / "check-prepare-1").unlink()  # the store now complete
+    (tmp_path / "sbatch-fails").write_text("")
+    proc = subprocess.run([shell, str(SLURM / "recover.sh"), chain], cwd=tmp_path, capture_output=True, text=True,
+                          env=run_env)
+    assert proc.returncode == 1 and "correct its sbatch flags" in proc.stderr and "bad array" not in proc.stderr
+
+
 def test_emulated_array_of_two_builds_the_reference_store(raw, reference, tmp_path):
     """Both array tasks really run (at once), with the real geodata, into one store."""
     out = tmp_path / "out.zarr"

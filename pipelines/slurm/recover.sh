@@ -154,11 +154,16 @@ if [ -n "$train_tasks" ]; then
     mapfile -t train_waiting < <(awk '{print $1}' <<< "$train_tasks" | sort -u)
     for job in ${train_waiting[@]+"${train_waiting[@]}"}; do wait_on "$job" "$after"; done
 else
-    last=${train_jobs[${#train_jobs[@]}-1]}
-    state=$(scontrol -o show job "$last" 2>/dev/null | grep -oE "JobState=[A-Z_]+" || true)
-    if [ "$state" = "JobState=COMPLETED" ] && (( settled )); then
+    last="" state=""
+    if (( ${#train_jobs[@]} )); then
+        last=${train_jobs[${#train_jobs[@]}-1]}
+        state=$(scontrol -o show job "$last" 2>/dev/null | grep -oE "JobState=[A-Z_]+" || true)
+    else  # submit.sh's sbatch for training failed (a typo in --sbatch-train, a partition refused): never ran
+        echo "train: the chain's record has no training job (its submission failed): submitting it" >&2
+    fi
+    if [ -n "$last" ] && [ "$state" = "JobState=COMPLETED" ] && (( settled )); then
         echo "train: job $last completed"
-    elif [ -z "$state" ] && (( settled )); then
+    elif [ -n "$last" ] && [ -z "$state" ] && (( settled )); then
         fail "SLURM no longer knows training job $last and it is not queued: whether it finished is in" \
             "$run/train.log; to train (resuming from $run/last.safetensors), run sbatch" \
             "${train_flags[*]-} $scripts/train.sbatch $out $run ${train_opts[*]-}"
@@ -166,7 +171,8 @@ else
         dependency=(); [ -n "$after" ] && dependency=(--dependency="$after")
         job=$(sbatch --parsable --nodes="$nodes" --output="logs/%x-%j.log" ${dependency[@]+"${dependency[@]}"} \
             ${train_flags[@]+"${train_flags[@]}"} "$scripts/train.sbatch" "$out" "$run" \
-            ${train_opts[@]+"${train_opts[@]}"}) || fail "resubmitting training failed"
+            ${train_opts[@]+"${train_opts[@]}"}) || fail "submitting training failed; correct its sbatch flags" \
+            "(train_flags=(${train_flags[*]-}) in $chain) and run recover.sh again"
         job=${job%%;*}
         printf 'train_jobs+=(%q)\n' "$job" >> "$chain"
         echo "train resubmitted (${state:-no record}): job $job"
