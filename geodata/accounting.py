@@ -6,7 +6,7 @@ from collections import defaultdict
 
 from geodata import store
 
-__all__ = ["read_attrs", "fates"]
+__all__ = ["read_attrs", "fates", "orphans", "orphan_rows", "REMOVE_ORPHANS"]
 
 
 def read_attrs(out, meshes: dict, damaged: dict | None = None) -> dict[str, dict]:
@@ -54,3 +54,23 @@ def fates(ledgers: dict, meshes: dict, attrs: dict, failures: dict, damaged: dic
             row.update(fate="failed", detail=f"[{failures[mesh_id].get('stage')}] {failures[mesh_id].get('error')}")
         rows.append(row)
     return rows
+
+
+REMOVE_ORPHANS = "geodata verify OUT --remove-orphans"
+
+
+def orphans(ledgers: dict, meshes) -> list[str]:
+    """The published meshes no input maps to any more: an input edited since (its ledger entry now names its new
+    mesh) or gone from its folder. None in a store without ledgers (one not written by prepare: nothing to
+    tell)."""
+    if not ledgers:
+        return []
+    mapped = {entry["mesh_id"] for entry in ledgers.values()}
+    return sorted(m for m in meshes if m not in mapped)
+
+
+def orphan_rows(orphaned: list[str], attrs: dict) -> list[dict]:
+    """`info --csv` rows of the orphans: the source and hash their mesh records."""
+    return [{"source": attrs.get(m, {}).get("source", ""), "sha256": attrs.get(m, {}).get("sha256", ""), "mesh_id": m,
+             "fate": "orphan", "detail": f"no input maps to this mesh any more (its file changed or is gone): left "
+                                         f"out of training; `{REMOVE_ORPHANS}` deletes it"} for m in orphaned]

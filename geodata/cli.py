@@ -403,15 +403,17 @@ def examples(out_dir):
 @click.argument("out", type=click.Path(exists=True))
 @click.option("--csv", "csv_file", type=click.Path(dir_okay=False, allow_dash=True), default=None,
               help="Also write one row per input file: source, sha256, mesh_id, fate (ok, duplicate, failed, "
-                   "pending, damaged), detail (the mesh it duplicates, or the failed stage and reason); '-': the table "
-                   "alone, on stdout.")
+                   "pending, damaged), detail (the mesh it duplicates, the failed stage and reason...); and one "
+                   "per orphan (fate orphan: a mesh no input maps to any more); '-': the table alone, on stdout.")
 def info(out, csv_file):
     """Inputs and their fates, counts, failures, sizes and stage timings of store OUT.
 
     Every input file any `geodata prepare` run found is accounted for: ok (its mesh), duplicate (a byte copy
-    of another input's mesh), failed (stage and reason), or pending (not done yet: a run is at work, or
-    was killed)."""
-    from geodata.accounting import fates, read_attrs
+    of another input's mesh), failed (stage and reason), damaged (its mesh's zip cannot be read: a rerun
+    redoes it) or pending (not done yet: a run is at work, or was killed). A published mesh no input maps to
+    any more (its file was edited or removed) is an orphan, left out of training. `geodata verify` checks
+    every file."""
+    from geodata.accounting import REMOVE_ORPHANS, fates, orphan_rows, orphans, read_attrs
 
     try:
         root = store.open_store(out)
@@ -421,9 +423,11 @@ def info(out, csv_file):
     failures = store.list_failures(out)
     damaged: dict[str, str] = {}
     attrs = read_attrs(out, meshes, damaged)
-    inputs = fates(store.read_ledgers(out), meshes, attrs, failures, damaged)
+    ledgers = store.read_ledgers(out)
+    inputs = fates(ledgers, meshes, attrs, failures, damaged)
+    orphaned = orphans(ledgers, meshes)
     if csv_file == "-":  # the table alone, for a pipe
-        _write_csv(csv_file, inputs)
+        _write_csv(csv_file, inputs + orphan_rows(orphaned, attrs))
         return
     by_fate = defaultdict(int)
     for row in inputs:
@@ -435,7 +439,8 @@ def info(out, csv_file):
     click.echo(f"inputs: {len(inputs)} files: {by_fate['ok']} ok, {by_fate['duplicate']} duplicate, "
                f"{by_fate['failed']} failed, {by_fate['pending']} pending"
                + (f", {by_fate['damaged']} damaged" if by_fate["damaged"] else ""))
-    click.echo(f"meshes: {len(meshes)} published, {len(mesh_failures)} failed; "
+    click.echo(f"meshes: {len(meshes)} published" + (f" ({len(orphaned)} orphan)" if orphaned else "")
+               + f", {len(mesh_failures)} failed; "
                + ", ".join(f"{sub}: {subs[sub]} ok, {sub_failed[sub]} failed" for sub in store.SUBGROUPS))
     if attrs:
         nv = np.array([a["n_vertices"] for a in attrs.values()])
@@ -448,6 +453,9 @@ def info(out, csv_file):
     if leftovers:
         click.echo(f"temporary files in meshes/: {len(leftovers)} (writers at work, or killed runs' leftovers: "
                    f"safe to delete while no run writes this store)")
+    for mesh_id in orphaned:
+        click.echo(f"orphan: {mesh_id}  {attrs.get(mesh_id, {}).get('source', '?')}  (no input maps to it any more: "
+                   f"left out of training; `{REMOVE_ORPHANS.replace('OUT', str(out))}` deletes it)")
     for mesh_id, reason in sorted(damaged.items()):
         click.echo(f"damaged: {mesh_id}  {reason} (left out of training; a rerun of geodata prepare redoes it)")
     noted = {a.get("source"): a["warnings"] for a in attrs.values() if a.get("warnings")}
@@ -461,7 +469,7 @@ def info(out, csv_file):
             sub = next((f" ({s})" for s in store.SUBGROUPS if name.endswith(f".{s}")), "")
             click.echo(f"  {a.get('source')}{sub}  [{a.get('stage')}]  {a.get('error')}")
     if csv_file:
-        _write_csv(csv_file, inputs)
+        _write_csv(csv_file, inputs + orphan_rows(orphaned, attrs))
 
 
 def _write_csv(path: str, rows: list[dict]) -> None:

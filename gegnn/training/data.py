@@ -6,6 +6,7 @@ loader worker makes it, so resumed, multi-worker and multi-process runs see iden
 from __future__ import annotations
 
 import hashlib
+import logging
 from collections import OrderedDict
 from dataclasses import dataclass
 from functools import cached_property
@@ -27,6 +28,7 @@ __all__ = ["GeodesicStore", "MeshGeometry", "Batch", "split_meshes", "epoch_batc
 DISTANCES = ("geodesic", "biharmonic")
 VAL_EPOCH = -1  # rng stream of the fixed validation sample
 GEOMETRY_CACHE = 64  # meshes a dataset keeps per process (every loader worker has its own)
+log = logging.getLogger("gegnn")
 
 
 @dataclass
@@ -47,19 +49,39 @@ class MeshGeometry:
 
 class GeodesicStore:
     """Read-only view of a store written by ``geodata prepare``: its published meshes (for biharmonic
-    distances, those whose ``biharmonic`` subgroup is published too). Opening it lists one folder; a mesh's
+    distances, those whose ``biharmonic`` subgroup is published too), but for orphans (meshes no input maps to
+    any more: an input edited or removed since, :func:`geodata.accounting.orphans`) unless ``include_orphans``.
+    The ids are one listing of meshes/ and the prepare runs' ledgers, read when first asked for; a mesh's
     arrays and attributes are read when asked for."""
 
-    def __init__(self, path, distance: str = "geodesic"):
+    def __init__(self, path, distance: str = "geodesic", include_orphans: bool = False):
         if distance not in DISTANCES:
             raise ValueError(f"distance must be one of {DISTANCES}, got {distance!r}")
-        self.path, self.distance = str(path), distance
+        self.path, self.distance, self.include_orphans = str(path), distance, include_orphans
         try:
             self.root = geostore.open_store(self.path)
         except geostore.StoreError as exc:
             raise ValueError(str(exc)) from None
-        meshes = geostore.list_meshes(self.path)
-        self.mesh_ids = [m for m, subs in meshes.items() if distance == "geodesic" or distance in subs]
+
+    @cached_property
+    def _published(self) -> dict[str, set[str]]:
+        return geostore.list_meshes(self.path)
+
+    @cached_property
+    def orphans(self) -> list[str]:
+        """Published meshes no input maps to any more (left out of ``mesh_ids`` unless ``include_orphans``)."""
+        from geodata.accounting import orphans
+
+        return orphans(geostore.read_ledgers(self.path), self._published)
+
+    @cached_property
+    def mesh_ids(self) -> list[str]:
+        left_out = set() if self.include_orphans else set(self.orphans)
+        if left_out:
+            log.warning("%s: %d orphaned meshes left out (no input maps to them any more; `geodata info %s` "
+                        "lists them)", self.path, len(left_out), self.path)
+        return [m for m, subs in self._published.items()
+                if (self.distance == "geodesic" or self.distance in subs) and m not in left_out]
 
     def attrs(self, mesh_id: str) -> dict:
         """The mesh's attributes (source, sha256, geometry_key, params, timings, ...)."""

@@ -148,3 +148,23 @@ def test_a_hash_taken_within_a_coarse_filesystem_tick_of_a_change_is_not_reused(
     for key in stat:
         assert reusable_hash({**fine, "sha256": "ab", "checked_ns": 9_500_000_000}, {**fine, key: 1}) is None
     assert reusable_hash({"sha256": "ab", "size": 10, "mtime_ns": 5_000_000_000}, stat) is None  # an old ledger
+
+
+def test_the_mesh_of_an_edited_input_is_an_orphan_left_out_of_training(tmp_path):
+    """After an input is edited and prepared again, its old mesh is no input's: info and --csv say `orphan`, the
+    trainer's GeodesicStore leaves it out unless asked for it."""
+    from gegnn.training.data import GeodesicStore
+
+    raw, out = prepared(tmp_path)
+    (old,) = store.list_meshes(out)
+    (raw / "ball.obj").write_bytes(ball_obj(0.5))
+    run("prepare", raw, out, *ARGS)
+    (new,) = set(store.list_meshes(out)) - {old}
+    info = run("info", out).output
+    assert "inputs: 1 files: 1 ok" in info and "meshes: 2 published (1 orphan)" in info
+    assert f"orphan: {old}  ball.obj" in info
+    rows = {r["mesh_id"]: r for r in csv_rows(out)}
+    assert rows[new]["fate"] == "ok" and rows[old]["fate"] == "orphan" and rows[old]["source"] == "ball.obj"
+    assert GeodesicStore(out).mesh_ids == [new]
+    assert GeodesicStore(out).orphans == [old]
+    assert GeodesicStore(out, include_orphans=True).mesh_ids == sorted([old, new])
