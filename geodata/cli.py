@@ -442,9 +442,10 @@ def info(out, csv_file):
     click.echo(f"meshes: {len(meshes)} published" + (f" ({len(orphaned)} orphan)" if orphaned else "")
                + f", {len(mesh_failures)} failed; "
                + ", ".join(f"{sub}: {subs[sub]} ok, {sub_failed[sub]} failed" for sub in store.SUBGROUPS))
-    if attrs:
-        nv = np.array([a["n_vertices"] for a in attrs.values()])
-        npairs = np.array([a["n_pairs"] for a in attrs.values()])
+    counted = [a for a in attrs.values() if "n_vertices" in a and "n_pairs" in a]
+    if counted:
+        nv = np.array([a["n_vertices"] for a in counted])
+        npairs = np.array([a["n_pairs"] for a in counted])
         click.echo(f"vertices per mesh: min {nv.min()}, mean {nv.mean():.0f}, max {nv.max()}; "
                    f"geodesic pairs: {npairs.sum():,} in all")
         click.echo(_stage_seconds([a.get("timings", {}) for a in attrs.values()]))

@@ -124,12 +124,14 @@ def reusable_hash(old: dict | None, stat: dict) -> str | None:
     return old["sha256"]
 
 
-def make_tasks(raw_dir: str | Path, sources: list[str], known: dict | None = None) -> tuple[list[MeshTask], dict]:
+def make_tasks(raw_dir: str | Path, sources: list[str], known: dict | None = None,
+               legacy: dict | None = None) -> tuple[list[MeshTask], dict]:
     """One task per distinct mesh id among ``sources`` (byte copies of one file name are one task, under the first
     path), and the ledger entry of every source: {sha256, mesh_id, size, mtime_ns, ctime_ns, inode, checked_ns}.
     ``known``: an earlier ledger's entries, whose hash is reused where a file's size, times and inode are
-    unchanged (a rerun reads no such file again: :func:`reusable_hash`). A file that cannot be read is a task
-    with its reason in ``error``."""
+    unchanged (a rerun reads no such file again: :func:`reusable_hash`). ``legacy``: (source, sha256) -> the id
+    an upgraded store kept for that file (:func:`geodata.store.legacy_ids`). A file that cannot be read is a
+    task with its reason in ``error``."""
     base = raw_root(raw_dir)
     tasks: dict[str, MeshTask] = {}
     entries = {}
@@ -141,7 +143,8 @@ def make_tasks(raw_dir: str | Path, sources: list[str], known: dict | None = Non
             digest = reusable_hash((known or {}).get(source), stat)
             if digest is None:
                 digest = hashlib.sha256(path.read_bytes()).hexdigest()
-            task = MeshTask(str(path.resolve()), source, mesh_id_of(source, digest), digest)
+            mesh_id = (legacy or {}).get((source, digest)) or mesh_id_of(source, digest)
+            task = MeshTask(str(path.resolve()), source, mesh_id, digest)
             entries[source] = {"sha256": digest, "mesh_id": task.mesh_id, **stat, "checked_ns": checked}
         except OSError as exc:  # permissions, a broken link, a file removed since the listing
             unreadable = mesh_id_of(source, hashlib.sha256(f"unreadable:{source}".encode()).hexdigest())
@@ -341,7 +344,7 @@ def plan_shard(raw_dir: str | Path, out: str, shard: tuple[int, int], include: s
     with contextlib.suppress(FileNotFoundError, json.JSONDecodeError, KeyError):
         known = None if rehash else json.loads((Path(out) / "sources" / f"{name}.json").read_text())["inputs"]
     tasks, entries = make_tasks(raw_dir, [s for s in discover(raw_dir, include, exclude) if in_shard(s, shard)],
-                                known)
+                                known, store.legacy_ids(out))
     ids = {t.mesh_id for t in tasks}
     found = {m for m in ids if store.mesh_file(out, m).is_file()}
     damaged = {m: reason for m in found if (reason := store.damage(out, m))}  # one small read of each: its end

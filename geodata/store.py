@@ -31,7 +31,7 @@ import zarr
 
 __all__ = ["StoreError", "DamagedMeshError", "FORMAT", "SUBGROUPS", "create_store", "open_store", "geometry_key", "mesh_file", "publish", "write_mesh",
            "read_mesh", "mesh_attrs", "list_meshes", "record_failure", "clear_failure", "list_failures",
-           "write_ledger", "read_ledgers", "temporary_files", "damage", "remove_damaged"]
+           "write_ledger", "read_ledgers", "read_ledger_files", "legacy_ids", "UPGRADE_LEDGER", "temporary_files", "damage", "remove_damaged"]
 
 FORMAT = 2  # 1: one zarr group per mesh (~14-20 files a mesh), before 2026-11-26
 SUBGROUPS = ("biharmonic", "points")
@@ -315,15 +315,47 @@ def write_ledger(out: str | Path, name: str, ledger: dict) -> None:
     os.replace(tmp, final)
 
 
+UPGRADE_LEDGER = "upgraded-from-format-1"  # written by `geodata upgrade`: the old store's sources and ids
+
+
+def read_ledger_files(out: str | Path) -> tuple[dict[str, dict], dict[str, str]]:
+    """Every ledger in sources/ by name, and those that cannot be read (name -> why)."""
+    ledgers, damaged = {}, {}
+    for path in sorted((Path(out) / "sources").glob("*.json")):
+        try:
+            ledger = json.loads(path.read_text())
+            if not isinstance(ledger.get("inputs"), dict) or "root" not in ledger or "written" not in ledger:
+                raise ValueError("no root, written or inputs")
+            ledgers[path.stem] = ledger
+        except (json.JSONDecodeError, OSError, ValueError, AttributeError) as exc:
+            damaged[path.stem] = " ".join(str(exc).split()) or type(exc).__name__
+    return ledgers, damaged
+
+
 def read_ledgers(out: str | Path) -> dict[tuple[str, str], dict]:
-    """Every input file any prepare run found: (input root, source) -> {sha256, mesh_id, size, mtime_ns}, the
-    newest ledger's entry where several runs saw one file."""
-    ledgers = []
-    for path in (Path(out) / "sources").glob("*.json"):
-        with contextlib.suppress(json.JSONDecodeError, OSError):
-            ledgers.append(json.loads(path.read_text()))
+    """Every input file any prepare run found: (input root, source) -> {sha256, mesh_id, size, mtime_ns, ...},
+    the newest ledger's entry where several runs saw one file. An upgraded store's sources (the ledger of
+    `geodata upgrade`) count until a prepare run finds a file of that name: that run's entry replaces it."""
+    ledgers, _ = read_ledger_files(out)
+    upgraded = ledgers.pop(UPGRADE_LEDGER, None)
     inputs = {}
-    for ledger in sorted(ledgers, key=lambda led: led["written"]):
+    for ledger in sorted(ledgers.values(), key=lambda led: led["written"]):
         for source, entry in ledger["inputs"].items():
             inputs[(ledger["root"], source)] = entry
+    if upgraded is not None:
+        seen = {source for _, source in inputs}
+        inputs.update({(upgraded["root"], source): entry for source, entry in upgraded["inputs"].items()
+                       if source not in seen})
     return inputs
+
+
+def legacy_ids(out: str | Path) -> dict[tuple[str, str], str]:
+    """The ids an upgraded store kept from format 1 (8 hex digits): (source, sha256) -> mesh id, from the
+    upgrade's ledger (empty for a store not upgraded). A prepare run gives a file of that name and content
+    this id, so that it is not published twice."""
+    path = Path(out) / "sources" / f"{UPGRADE_LEDGER}.json"
+    try:
+        inputs = json.loads(path.read_text())["inputs"]
+    except (FileNotFoundError, json.JSONDecodeError, KeyError, TypeError):
+        return {}
+    return {(source, e["sha256"]): e["mesh_id"] for source, e in inputs.items() if e.get("sha256")}

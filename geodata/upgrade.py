@@ -27,7 +27,8 @@ def upgrade_store(old, new, progress=None) -> dict:
     """Copy format-1 store OLD into a new format-2 store NEW: committed meshes (their biharmonic and points
     subgroups, committed or failed) and failure records; meshes a killed run left without their mark are
     not copied (prepare redoes them). Meshes of format 1 have no ``input/`` arrays. A ledger of the sources
-    the old store names is written, so `geodata info` accounts for them. Returns the counts."""
+    the old store names is written (with each file's sha256), so `geodata info` accounts for them and a later
+    prepare of the same file gives it its old id (:func:`geodata.store.legacy_ids`). Returns the counts."""
     root = zarr.open_group(str(old), mode="r")
     if root.attrs.get("geodata_format") != 1:
         raise store.StoreError(f"{old} is not a geodata store of format 1")
@@ -65,6 +66,6 @@ def upgrade_store(old, new, progress=None) -> dict:
         store.record_failure(new, name, a.get("source", name), a.get("stage", "unknown"), a.get("error", ""))
         inputs.setdefault(a.get("source", name), {"sha256": None, "mesh_id": name, "size": None, "mtime_ns": None})
         counts["failures"] += 1
-    store.write_ledger(new, "upgraded-from-format-1", {"root": str(old), "shard": "0/1", "written": time.time(),
+    store.write_ledger(new, store.UPGRADE_LEDGER, {"root": str(old), "shard": "0/1", "written": time.time(),
                                                        "inputs": inputs})
     return counts

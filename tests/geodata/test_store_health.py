@@ -115,7 +115,7 @@ def test_an_input_rewritten_in_place_with_its_size_and_mtime_is_hashed_again(tmp
     assert ball.stat().st_mtime_ns == before.st_mtime_ns
     result = run("prepare", raw, out, *ARGS)
     assert "1 to do" in result.output
-    rows = [r for r in csv_rows(out) if r["source"] == "ball.obj"]
+    rows = [r for r in csv_rows(out) if r["source"] == "ball.obj" and r["fate"] != "orphan"]
     assert [r["sha256"] for r in rows] == [hashlib.sha256(ellipsoid).hexdigest()]
     with store.read_mesh(out, rows[0]["mesh_id"]) as g:
         extent = np.ptp(g["vertices"][:], axis=0)
@@ -168,3 +168,38 @@ def test_the_mesh_of_an_edited_input_is_an_orphan_left_out_of_training(tmp_path)
     assert GeodesicStore(out).mesh_ids == [new]
     assert GeodesicStore(out).orphans == [old]
     assert GeodesicStore(out, include_orphans=True).mesh_ids == sorted([old, new])
+
+
+def test_preparing_into_an_upgraded_store_publishes_no_file_twice(tmp_path):
+    """A format-1 mesh keeps its 8-hex id through `geodata upgrade`; a later prepare of the same file recognises
+    it (the upgrade's ledger maps the file's sha256 to it) instead of publishing it again under a 32-hex id."""
+    import hashlib
+
+    import zarr
+
+    from geodata.prepare import PrepareConfig
+
+    raw = tmp_path / "raw"
+    raw.mkdir()
+    data = ball_obj()
+    (raw / "ball.obj").write_bytes(data)
+    (raw / "egg.obj").write_bytes(ball_obj(0.5))
+    digest = hashlib.sha256(data).hexdigest()
+    params = PrepareConfig(300, 150).store_params()
+    old, new = tmp_path / "old.zarr", tmp_path / "new.zarr"
+    root = zarr.open_group(str(old), mode="w", attributes={"geodata_format": 1, "params": params})
+    legacy = f"ball-{digest[:8]}"
+    g = root.create_group("meshes").create_group(legacy)
+    v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], np.float32)
+    f = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], np.int32)
+    for name, a in {"vertices": v, "faces": f, "normals": v, "edges": f[:, :2],
+                    "geodesic/pairs": np.zeros((1, 2), np.uint32), "geodesic/distances": np.ones(1, np.float32)}.items():
+        g.create_array(name, data=a)
+    g.attrs.update(source="ball.obj", sha256=digest, status="ok")
+    run("upgrade", old, new)
+    result = run("prepare", raw, new, *ARGS)
+    assert "1 published" in result.output and "1 to do" in result.output  # the egg alone
+    meshes = store.list_meshes(new)
+    assert len(meshes) == 2 and legacy in meshes
+    assert "inputs: 2 files: 2 ok, 0 duplicate, 0 failed, 0 pending" in run("info", new).output
+    assert {r["source"]: r["mesh_id"] for r in csv_rows(new)}["ball.obj"] == legacy
