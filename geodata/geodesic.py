@@ -41,7 +41,7 @@ def available_memory() -> int:
     """Bytes this process may still allocate: its RLIMIT_DATA less its data segment (``run_isolated``
     under --max-memory sets it) where set; else the least of the cgroup's memory limit and the
     machine's MemAvailable (on Windows, without rlimits or /proc: no limit known)."""
-    from geodata.parallel import _cgroup_memory
+    from geodata.parallel import _cgroup_memory, _status_kib
 
     try:
         import resource
@@ -52,16 +52,6 @@ def available_memory() -> int:
         return max(0, soft - _status_kib("VmData:", "/proc/self/status") * 1024)
     limits = [m for m in (_cgroup_memory(), _status_kib("MemAvailable:", "/proc/meminfo") * 1024) if m]
     return min(limits) if limits else 1 << 62
-
-
-def _status_kib(key: str, path: str) -> int:
-    """A ``key: <n> kB`` line of a /proc file, in KiB (0 where absent)."""
-    try:
-        with open(path) as file:
-            line = next((line for line in file if line.startswith(key)), "")
-    except OSError:
-        return 0
-    return int(line.split()[1]) if line else 0
 
 
 def _require_memory(n_vertices: int) -> None:

@@ -42,9 +42,10 @@ def run_isolated(fn: Callable[..., Any], *args, timeout: float | None = None,
     never reach the console: each distinct one is appended to `warnings_out` as "[stage] Category:
     message", for the caller to log.
 
-    `max_memory` (bytes, None: no limit) caps the child's data size: its heap and private anonymous
-    mappings (RLIMIT_DATA, Linux >= 4.7), what it inherited from this process included (0.2-0.5 GiB
-    measured with geodata's libraries and torch loaded). An allocation beyond it fails in the child and
+    `max_memory` (bytes, None: no limit) caps what the child allocates: its heap and private anonymous
+    mappings (RLIMIT_DATA, Linux >= 4.7) beyond those it inherited from this process (0.2-0.5 GiB measured
+    with geodata's libraries and torch loaded, shared with this process until written, not counted: the
+    limit is the child's data size at the fork plus `max_memory`). An allocation beyond it fails in the child and
     the mesh fails with MeshError(stage, "out of memory: over the --max-memory limit of X GiB"): NumPy's
     MemoryError, the exact solver's std::bad_alloc (pybind11 raises MemoryError) and pymeshlab's (a
     PyMeshLabException naming std::bad_alloc) all do, measured; a native abort under a limit (an
@@ -117,7 +118,8 @@ def _child(fn, args, write_fd: int, max_memory: int | None) -> None:
             import resource  # Unix only, as os.fork: a platform without fork never gets here
 
             hard = resource.getrlimit(resource.RLIMIT_DATA)[1]
-            limit = max_memory if hard == resource.RLIM_INFINITY else min(max_memory, hard)
+            allowed = _status_kib("VmData:", "/proc/self/status") * 1024 + max_memory  # the inherited not counted
+            limit = allowed if hard == resource.RLIM_INFINITY else min(allowed, hard)
             with contextlib.suppress(ValueError, OSError):  # a platform that refuses it: the mesh runs unlimited
                 resource.setrlimit(resource.RLIMIT_DATA, (limit, hard))
                 out_of_memory = _over_limit(max_memory)
@@ -221,6 +223,16 @@ def _slurm_memory() -> int | None:
         cpus = os.environ.get("SLURM_CPUS_PER_TASK", "1")
         return per_cpu * (int(cpus) if cpus.isdigit() else 1)
     return megabytes("SLURM_MEM_PER_NODE") or None
+
+
+def _status_kib(key: str, path: str) -> int:
+    """A ``key: <n> kB`` line of a /proc file, in KiB (0 where absent)."""
+    try:
+        with open(path) as file:
+            line = next((line for line in file if line.startswith(key)), "")
+    except OSError:
+        return 0
+    return int(line.split()[1]) if line else 0
 
 
 def _cgroup_memory(proc_cgroup: str = "/proc/self/cgroup", mount: str = "/sys/fs/cgroup") -> int | None:

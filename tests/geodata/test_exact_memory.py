@@ -52,7 +52,7 @@ def test_available_memory_is_the_rlimit_data_left_under_a_max_memory_limit():
     """Under run_isolated's --max-memory (RLIMIT_DATA in a forked child) the probe reads the limit less the
     child's data segment; outside it, at most the machine's MemAvailable."""
     headroom = 256 << 20
-    left = run_isolated(available_memory, max_memory=vm_data() + headroom)
+    left = run_isolated(available_memory, max_memory=headroom)
     assert headroom // 2 < left <= headroom + (64 << 20)
     meminfo = next(line for line in open("/proc/meminfo") if line.startswith("MemAvailable:"))
     assert 0 < available_memory() <= int(meminfo.split()[1]) * 1024 * 1.1
@@ -61,4 +61,4 @@ def test_available_memory_is_the_rlimit_data_left_under_a_max_memory_limit():
 def test_under_a_small_max_memory_the_child_refuses_with_the_estimate_instead_of_dying():
     mesh = sphere(5)  # 10,242 vertices
     with pytest.raises(MeshError, match=r"geodesic: the exact solver would need ~.* GiB available"):
-        run_isolated(lambda: geodesic_solver(mesh)(0), max_memory=vm_data() + (8 << 20))
+        run_isolated(lambda: geodesic_solver(mesh)(0), max_memory=8 << 20)

@@ -145,20 +145,21 @@ def test_a_mesh_over_its_memory_limit_fails_as_out_of_memory_and_the_parent_live
     import resource
 
     before = resource.getrlimit(resource.RLIMIT_DATA)
-    limit = _data_size() + (256 << 20)  # what the fork inherits, and 256 MiB more
+    limit = 128 << 20  # beyond what the fork inherits (this test session's data: numpy, libigl, ..., 0.2 GiB)
+    assert _data_size() > limit  # counted, the inherited alone would be over the limit
     assert run_isolated(_allocate, 64 << 20, max_memory=limit) == 8 << 20  # under it: as without a limit
     with pytest.raises(MeshError) as info:
         run_isolated(_allocate, 1 << 30, max_memory=limit)
     assert info.value.stage == "remesh"
     assert info.value.reason == f"out of memory: over the --max-memory limit of {limit / 2 ** 30:.3g} GiB"
     # the exact solver's own std::bad_alloc (pybind11 raises MemoryError): 2,562 sources x 2,562 vertices
-    # are 52 MB of distances; with 16 MiB more than the fork's, out of memory (64 MiB: enough, measured).
+    # are 52 MB of distances; with 16 MiB beyond the fork's, out of memory (64 MiB: enough, measured).
     # In a fresh process: a long-lived one (a test session) holds freed heap the child may reuse uncounted.
     script = (f"import sys; sys.path.insert(0, {os.path.dirname(__file__)!r}); import numpy as np, trimesh; "
               "from test_parallel import _exact_solver, _data_size; from geodata.parallel import run_isolated; "
               "from geodata.mesh import MeshError; from geodata._exact_geodesic import Surface; "
               "s = trimesh.creation.icosphere(4); m = np.asarray(s.vertices, np.float64), np.asarray(s.faces, np.int32)\n"
-              "try:\n run_isolated(_exact_solver, *m, max_memory=_data_size() + (16 << 20)); print('no error')\n"
+              "try:\n run_isolated(_exact_solver, *m, max_memory=16 << 20); print('no error')\n"
               "except MeshError as e:\n print(e.stage, e.reason)\n"
               "print(run_isolated(_exact_solver, *m))")
     lines = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300).stdout.splitlines()
