@@ -127,6 +127,7 @@ def main():
       geodata prepare raw/ out/ --pairs 600000 --jobs 8
       geodata biharmonic out/ --jobs 8
       geodata info out/
+      geodata verify out/              # open every file: damaged, orphaned, duplicated, unaccounted
     """
 
 
@@ -471,6 +472,46 @@ def info(out, csv_file):
             click.echo(f"  {a.get('source')}{sub}  [{a.get('stage')}]  {a.get('error')}")
     if csv_file:
         _write_csv(csv_file, inputs + orphan_rows(orphaned, attrs))
+
+
+@main.command()
+@click.argument("out", type=click.Path(exists=True, file_okay=False))
+@click.option("--remove-orphans", is_flag=True,
+              help="Delete the orphans found (meshes no input maps to any more, with their subgroups).")
+@click.option("--remove-damaged", is_flag=True,
+              help="Delete the damaged zips and failure records found, for a rerun of their stage to redo them.")
+def verify(out, remove_orphans, remove_damaged):
+    """The store doctor: open every published zip (every member's CRC) and every ledger of store OUT and name
+    each damaged, orphaned, duplicated or unaccounted entry with what to do; exit 1 when any is left.
+
+    \b
+    damaged      a zip that cannot be read whole, a ledger or failure record that cannot be read
+    orphan       a published mesh no input maps to any more (its file was edited or removed)
+    duplicated   one input (name and sha256) published under two ids
+    unaccounted  an input neither published nor failed; a file of meshes/ that belongs to no mesh
+
+    The --remove options delete while no run writes the store; run them only then."""
+    from geodata import doctor
+
+    try:
+        findings = doctor.examine(out, lambda items: progress_bar(items, desc="verify", unit="zip", disable=None))
+    except store.StoreError as exc:
+        raise click.ClickException(str(exc)) from None
+    removed = (doctor.remove_orphans(out, findings) if remove_orphans else []) + \
+        (doctor.remove_damaged(out, findings) if remove_damaged else [])
+    for name in removed:
+        click.echo(f"removed: {name}")
+    if removed:
+        findings = doctor.examine(out)
+    for finding in findings:
+        click.echo(finding.line().replace(" OUT", f" {out}"))
+    leftovers = store.temporary_files(out)
+    if leftovers:
+        click.echo(f"note: {len(leftovers)} temporary files in meshes/ (writers at work, or killed runs' leftovers: "
+                   f"safe to delete while no run writes this store)")
+    click.echo(f"verify {out}: {doctor.summary(findings)}")
+    if findings:
+        sys.exit(1)
 
 
 def _write_csv(path: str, rows: list[dict]) -> None:

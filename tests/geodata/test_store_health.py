@@ -203,3 +203,59 @@ def test_preparing_into_an_upgraded_store_publishes_no_file_twice(tmp_path):
     assert len(meshes) == 2 and legacy in meshes
     assert "inputs: 2 files: 2 ok, 0 duplicate, 0 failed, 0 pending" in run("info", new).output
     assert {r["source"]: r["mesh_id"] for r in csv_rows(new)}["ball.obj"] == legacy
+
+
+def test_verify_names_one_of_each_problem_and_a_rerun_redoes_the_damaged(tmp_path):
+    """The store doctor on a store with a damaged zip, an orphan, a duplicated input and an unaccounted one:
+    each named with what to do, exit 1; prepare redoes the damaged mesh, --remove-orphans deletes the orphan."""
+    import json
+    import shutil
+
+    raw, out = prepared(tmp_path, {"ball.obj": ball_obj(), "cube.obj": trimesh.exchange.obj.export_obj(
+        trimesh.creation.box()).encode()})
+    ids = {a["source"]: m for m, a in ((m, store.mesh_attrs(out, m)) for m in store.list_meshes(out))}
+    (raw / "ball.obj").write_bytes(ball_obj(0.5))  # orphan: the sphere's mesh
+    run("prepare", raw, out, *ARGS)
+    cube = store.mesh_file(out, ids["cube.obj"])
+    twin = store.mesh_file(out, "cube-0123abcd")  # duplicated: the same input under an 8-hex id, in a ledger
+    shutil.copyfile(cube, twin)
+    store.write_ledger(out, "elsewhere", {"root": "/elsewhere", "shard": "0/1", "written": 0.0, "inputs": {
+        "cube.obj": {"sha256": store.mesh_attrs(out, ids["cube.obj"])["sha256"], "mesh_id": "cube-0123abcd"},
+        "gone.obj": {"sha256": "cd" * 32, "mesh_id": "gone-" + "cd" * 16}}})  # unaccounted: never published
+    (egg,) = {m for m in store.list_meshes(out)} - set(ids.values()) - {"cube-0123abcd"}
+    egg_file = store.mesh_file(out, egg)
+    egg_file.write_bytes(egg_file.read_bytes()[:100])  # damaged
+    result = run("verify", out, code=1)
+    lines = result.output.splitlines()
+    assert f"verify {out}: 1 damaged, 1 orphan, 1 duplicated, 1 unaccounted" in lines
+    assert any(line.startswith(f"damaged: meshes/{egg}.zip") and "geodata prepare" in line for line in lines)
+    assert any(line.startswith(f"orphan: meshes/{ids['ball.obj']}.zip") and "--remove-orphans" in line for line in lines)
+    assert any(line.startswith("duplicated: meshes/cube-0123abcd.zip, ") and ids["cube.obj"] in line for line in lines)
+    assert any(line.startswith("unaccounted: gone.obj") for line in lines)
+    run("prepare", raw, out, *ARGS)  # redoes the damaged mesh
+    again = run("verify", out, "--remove-orphans", code=1).output
+    assert f"removed: meshes/{ids['ball.obj']}.zip" in again
+    assert f"verify {out}: 0 damaged, 0 orphan, 1 duplicated, 1 unaccounted" in again
+    twin.unlink()
+    store.write_ledger(out, "elsewhere", {"root": "/elsewhere", "shard": "0/1", "written": 0.0, "inputs": {}})
+    assert "0 damaged, 0 orphan, 0 duplicated, 0 unaccounted" in run("verify", out).output
+    assert json.loads((out / "sources" / "elsewhere.json").read_text())["inputs"] == {}
+
+
+def test_a_zip_damaged_inside_is_found_by_verify_and_removed_for_a_rerun(tmp_path):
+    """A flipped byte inside a zip whose directory is whole: verify's CRC check finds it, --remove-damaged
+    deletes it, a rerun of prepare publishes it again."""
+    raw, out = prepared(tmp_path)
+    (mesh_id,) = store.list_meshes(out)
+    path = store.mesh_file(out, mesh_id)
+    data = bytearray(path.read_bytes())
+    with __import__("zipfile").ZipFile(path) as z:
+        info = z.getinfo("geodesic/distances/c/0")
+    data[info.header_offset + 30 + len(info.filename) + 5] ^= 0xFF
+    path.unlink()
+    path.write_bytes(bytes(data))
+    assert "CRC" in run("verify", out, code=1).output
+    removed = run("verify", out, "--remove-damaged", code=1).output
+    assert f"removed: meshes/{mesh_id}.zip" in removed and "unaccounted: ball.obj" in removed  # to do again
+    run("prepare", raw, out, *ARGS)
+    assert "0 damaged, 0 orphan, 0 duplicated, 0 unaccounted" in run("verify", out).output
