@@ -95,7 +95,9 @@ CHECK_OPTION = click.option(
     "--check", is_flag=True,
     help="Do no work: print this shard's counts and exit 0 when every one of its inputs is accounted for "
          "(published, a byte copy of a published one, or a recorded failure), 3 while some are pending "
-         "(what a scheduler's recovery asks before releasing the next stage).")
+         "(what a scheduler's recovery asks before releasing the next stage). Reads no input file: one the "
+         "shard's ledger does not vouch for (new, or changed since its last run) is pending. --retry-failed and "
+         "--rehash change how a run works, not what a check counts.")
 TIMEOUT_OPTION = click.option("--timeout", default=1800.0, show_default=True,
                               help="Seconds one mesh may take before it counts as failed.")
 
@@ -183,15 +185,26 @@ def prepare(raw_dir, out, pairs, target_vertices, collapse, seed, geodesic_backe
         raise click.ClickException(str(exc)) from None
     except OSError as exc:  # a parent that is a file, no permission, a full disk...
         raise click.ClickException(f"{out}: cannot create the store: {exc.strerror or exc}") from None
-    plan = plan_shard(raw_dir, out, shard, include, exclude, rehash)
+    # A check reads no input file (a recovery checks every shard, again and again) and asks what a run of
+    # these options leaves to do: --rehash and --retry-failed change how a run works, not when it is done.
+    plan = plan_shard(raw_dir, out, shard, include, exclude, rehash and not check, read=not check)
     pending_now = plan.pending()
     tasks = plan.pending(retry_failed)
     where = "" if shard == (0, 1) else f" (shard {shard[0]}/{shard[1]})"
-    damaged = f" ({len(plan.damaged)} damaged: redone by a run)" if plan.damaged else ""
-    counts = (f"{len(plan.ledger['inputs'])} input files, {len(plan.tasks)} distinct, {len(plan.published)} "
-              f"published, {len(plan.failed - plan.published)} failed, {len(pending_now)} pending{damaged}{where}")
+    notes = [f"{len(plan.unread)} not read yet"] * bool(plan.unread) + \
+        [f"{len(plan.damaged)} damaged: redone by a run"] * bool(plan.damaged)
+    counts = (f"{len(plan.ledger['inputs']) + len(plan.unread)} input files, {len(plan.tasks)} distinct, "
+              f"{len(plan.published)} published, {len(plan.failed - plan.published)} failed, "
+              f"{len(pending_now) + len(plan.unread)} pending" + (f" ({'; '.join(notes)})" if notes else "") + where)
+    shard_meshes = {t.mesh_id for t in plan.tasks}.__contains__  # the points step's: the meshes of this shard
     if check:
-        _exit_check(f"prepare {raw_dir} -> {out}: {counts}", len(pending_now))
+        todo = len(pending_now) + len(plan.unread)
+        if n_points:
+            points_todo, points_done, points_failed = pending(out, "points", shard_meshes) if Path(out).exists() \
+                else ([], 0, 0)
+            counts += f"; points: {points_done} done, {points_failed} failed, {len(points_todo)} pending"
+            todo += len(points_todo)
+        _exit_check(f"prepare {raw_dir} -> {out}: {counts}", todo)
     store.write_ledger(out, plan.ledger_name, plan.ledger)  # every input accounted for before any work
     for mesh_id, reason in plan.damaged.items():
         if store.remove_damaged(out, mesh_id):
@@ -203,7 +216,7 @@ def prepare(raw_dir, out, pairs, target_vertices, collapse, seed, geodesic_backe
         from geodata.points_runner import PointsConfig, process_points
         rows += _add_subgroup(out, "points", process_points,
                               PointsConfig(n_points, pairs, seed, timeout, config.max_memory), retry_failed, False,
-                              jobs, backend, scheduler, shard, log_file, max_memory)
+                              jobs, backend, scheduler, shard, log_file, max_memory, keep=shard_meshes)
     failed = sum(r["status"] != "ok" for r in rows)
     if strict and failed:
         raise click.ClickException(f"--strict: {failed} of {len(rows)} meshes failed (listed above and in "
@@ -284,15 +297,18 @@ def biharmonic(out, pairs, seed, timeout, retry_failed, check, **scale):
 
 
 def _add_subgroup(out, subgroup, process, config, retry_failed, check, jobs, backend, scheduler, shard,
-                  log_file, max_memory) -> list[dict]:
+                  log_file, max_memory, keep=None) -> list[dict]:
     """Run ``process`` on this shard's published meshes still without ``subgroup``, with a summary; the
-    rows of this run. ``check``: print the counts and exit (:func:`_exit_check`) instead."""
+    rows of this run. The shard's meshes: those whose id ``in_shard``, or those ``keep`` accepts (prepare's
+    points step: the meshes its shard prepared). ``check``: print the counts and exit (:func:`_exit_check`)
+    instead; a failure is then accounted for with or without ``retry_failed`` (it changes the run, not when
+    it is done)."""
     _setup_logging(log_file)
     try:
         store.open_store(out)
     except store.StoreError as exc:
         raise click.ClickException(str(exc)) from None
-    tasks, n_done, n_failed = pending(out, subgroup, partial(in_shard, shard=shard), retry_failed)
+    tasks, n_done, n_failed = pending(out, subgroup, keep or partial(in_shard, shard=shard), retry_failed and not check)
     where = "" if shard == (0, 1) else f" (shard {shard[0]}/{shard[1]})"
     if check:
         _exit_check(f"{subgroup} {out}: {n_done} done, {n_failed} failed, {len(tasks)} pending{where}", len(tasks))

@@ -125,13 +125,14 @@ def reusable_hash(old: dict | None, stat: dict) -> str | None:
 
 
 def make_tasks(raw_dir: str | Path, sources: list[str], known: dict | None = None,
-               legacy: dict | None = None) -> tuple[list[MeshTask], dict]:
+               legacy: dict | None = None, unread: list | None = None) -> tuple[list[MeshTask], dict]:
     """One task per distinct mesh id among ``sources`` (byte copies of one file name are one task, under the first
     path), and the ledger entry of every source: {sha256, mesh_id, size, mtime_ns, ctime_ns, inode, checked_ns}.
     ``known``: an earlier ledger's entries, whose hash is reused where a file's size, times and inode are
     unchanged (a rerun reads no such file again: :func:`reusable_hash`). ``legacy``: (source, sha256) -> the id
-    an upgraded store kept for that file (:func:`geodata.store.legacy_ids`). A file that cannot be read is a
-    task with its reason in ``error``."""
+    an upgraded store kept for that file (:func:`geodata.store.legacy_ids`). ``unread``: no file is read; the
+    sources whose hash ``known`` does not give are appended to it instead (no task, no entry). A file that cannot
+    be read is a task with its reason in ``error``."""
     base = raw_root(raw_dir)
     tasks: dict[str, MeshTask] = {}
     entries = {}
@@ -141,6 +142,9 @@ def make_tasks(raw_dir: str | Path, sources: list[str], known: dict | None = Non
             checked = time.time_ns()
             stat = file_stat(path.stat())
             digest = reusable_hash((known or {}).get(source), stat)
+            if digest is None and unread is not None:
+                unread.append(source)
+                continue
             if digest is None:
                 digest = hashlib.sha256(path.read_bytes()).hexdigest()
             mesh_id = (legacy or {}).get((source, digest)) or mesh_id_of(source, digest)
@@ -320,6 +324,7 @@ class ShardPlan:
     published: set[str]        # ids among ``tasks`` already in the store, whole
     failed: set[str]           # ids among ``tasks`` with a failure record
     damaged: dict[str, str] = field(default_factory=dict)  # ids among ``tasks`` whose zip is damaged: the reason
+    unread: list[str] = field(default_factory=list)  # a check's: files its ledger does not vouch for (pending)
 
     def pending(self, retry_failed: bool = False) -> list[MeshTask]:
         """The tasks still to do (with ``retry_failed``, the failed ones too); a damaged mesh is to do again."""
@@ -336,18 +341,21 @@ def ledger_name(raw_dir: str | Path, shard: tuple[int, int], include: set[str] |
 
 
 def plan_shard(raw_dir: str | Path, out: str, shard: tuple[int, int], include: set[str] | None = None,
-               exclude: set[str] | None = None, rehash: bool = False) -> ShardPlan:
+               exclude: set[str] | None = None, rehash: bool = False, read: bool = True) -> ShardPlan:
     """This shard's files (hashed, or their hash taken from the shard's last ledger where unchanged; with
     ``rehash`` every file is hashed) and the state of their meshes, from the shard's own files and records
-    alone: its cost does not grow with the store."""
+    alone: its cost does not grow with the store. ``read=False`` (a check): no file is read, those the ledger
+    does not vouch for are ``unread``."""
     name, known = ledger_name(raw_dir, shard, include, exclude), None
     with contextlib.suppress(FileNotFoundError, json.JSONDecodeError, KeyError):
         known = None if rehash else json.loads((Path(out) / "sources" / f"{name}.json").read_text())["inputs"]
+    unread = None if read else []
     tasks, entries = make_tasks(raw_dir, [s for s in discover(raw_dir, include, exclude) if in_shard(s, shard)],
-                                known, store.legacy_ids(out))
+                                known, store.legacy_ids(out), unread)
     ids = {t.mesh_id for t in tasks}
     found = {m for m in ids if store.mesh_file(out, m).is_file()}
     damaged = {m: reason for m in found if (reason := store.damage(out, m))}  # one small read of each: its end
     ledger = {"root": str(raw_root(raw_dir).resolve()), "shard": f"{shard[0]}/{shard[1]}", "written": time.time(),
               "inputs": entries}
-    return ShardPlan(tasks, ledger, name, found - set(damaged), set(store.list_failures(out, ids)), damaged)
+    return ShardPlan(tasks, ledger, name, found - set(damaged), set(store.list_failures(out, ids)), damaged,
+                     unread or [])

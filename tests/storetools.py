@@ -81,3 +81,13 @@ def synthetic_catalog(raw, out, n: int) -> list[str]:
     store.write_ledger(out, ledger_name(raw, (0, 1), None, None),
                        {"root": str(raw.resolve()), "shard": "0/1", "written": 0.0, "inputs": inputs})
     return ids
+
+
+def ball_obj(z_scale: float = 1.0) -> bytes:
+    """An icosphere squashed along z by ``z_scale``, its numbers fixed-width: every such file has the same size."""
+    import trimesh
+
+    sphere = trimesh.creation.icosphere(1)
+    lines = [f"v {x:+.6f} {y:+.6f} {z * z_scale:+.6f}" for x, y, z in sphere.vertices]
+    lines += [f"f {a + 1:3d} {b + 1:3d} {c + 1:3d}" for a, b, c in sphere.faces]
+    return ("\n".join(lines) + "\n").encode()

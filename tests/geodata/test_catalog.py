@@ -87,7 +87,8 @@ def test_a_shard_tells_whether_its_inputs_are_all_accounted_for(catalog):
 
 
 def test_a_rerun_reads_no_unchanged_file_again(catalog, monkeypatch):
-    """A shard's ledger keeps each file's hash with its size and time: its rerun hashes only changed files."""
+    """A shard's ledger keeps each file's hash with its size, times and inode: its rerun hashes only changed
+    files, and its check none (a changed file is pending until a run reads it)."""
     import geodata.prepare
 
     raw, out, _ = catalog
@@ -99,8 +100,11 @@ def test_a_rerun_reads_no_unchanged_file_again(catalog, monkeypatch):
     assert hashed and not contents.intersection(hashed)
     changed = raw / "02/b/models/model_normalized.obj"
     changed.write_bytes(changed.read_bytes() + b"# touched\n")
+    checks = [CliRunner().invoke(main, ["prepare", str(raw), str(out), *ARGS, "--shard", f"{k}/2", "--check"])
+              for k in range(2)]
+    assert sorted(c.exit_code for c in checks) == [0, 3] and not contents.union({changed.read_bytes()}) & set(hashed)
     for k in range(2):
-        CliRunner().invoke(main, ["prepare", str(raw), str(out), *ARGS, "--shard", f"{k}/2", "--check"])
+        CliRunner().invoke(main, ["prepare", str(raw), str(out), *ARGS, "--shard", f"{k}/2"])
     assert contents.union({changed.read_bytes()}).intersection(hashed) == {changed.read_bytes()}
 
 

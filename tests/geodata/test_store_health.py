@@ -12,16 +12,9 @@ from click.testing import CliRunner
 
 from geodata import store
 from geodata.cli import main
+from storetools import ball_obj
 
-ARGS = ["--pairs", "300", "--target-vertices", "150"]
-
-
-def ball_obj(z_scale: float = 1.0) -> bytes:
-    """An icosphere squashed along z by ``z_scale``, its numbers fixed-width: every such file has the same size."""
-    sphere = trimesh.creation.icosphere(1)
-    lines = [f"v {x:+.6f} {y:+.6f} {z * z_scale:+.6f}" for x, y, z in sphere.vertices]
-    lines += [f"f {a + 1:3d} {b + 1:3d} {c + 1:3d}" for a, b, c in sphere.faces]
-    return ("\n".join(lines) + "\n").encode()
+ARGS = ["--pairs", "300", "--target-vertices", "150"]  # small: a mesh in ~0.5 s
 
 
 def run(*args, code=0):
