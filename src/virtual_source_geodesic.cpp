@@ -1,0 +1,418 @@
+// Approximate geodesic distances from one vertex to all vertices by virtual source propagation, in the
+// spirit of GSP (Trettner, Bommes, Kobbelt, "Geodesic Distance Computation via Virtual Source
+// Propagation", CGF 40(5) 2021).
+//
+// Each face f carries one virtual source: a point S_f in the face's own plane (its frame: corner 0 at
+// the origin, corner 1 on +x, corner 2 above) and a distance sigma_f, so that a point X of the face is
+// at sigma_f + |S_f - X| from the source along a path that is straight in the unfolding. The source
+// vertex's faces start with S = the source, sigma = 0. A face hands its source to the face g across
+// each of its edges ab, unfolded into the edge's frame in g (the rotation about the shared edge: a at
+// the origin, b on +x, g's third vertex c above, S below). Two rays from S decide, the one to c and
+// the one to the probe point p = c + probe (m - c) (m: g's centroid; the default probe 1 is m itself):
+//
+//     c:  d(c) <- sigma + |S - c|                 where the ray to c crosses the segment ab,
+//         d(c) <- sigma + |S - e| + |e - c|       else, e the endpoint of ab the ray passes;
+//     g:  S_g = S, sigma_g = sigma                 where the ray to p crosses ab,
+//         S_g = e, sigma_g = d(e)                  else (the path bends around e: a saddle, a
+//                                                  boundary, or a vertex another strip passes straight).
+//
+// A source on c's side of ab (it lit f through another edge) bends at the endpoint nearer m. g keeps
+// the candidate when it is nearer at m than g's source so far, and is queued to hand it on. On a plane
+// every unfolding is exact and so are the distances. On a curved surface a path is straight through a
+// strip of faces, as the exact solver's windows are, but a face keeps one source where the exact solver
+// keeps a window for each family of paths that crosses it, and the probe lets a source through where
+// part of the face sees it: values are a few tenths of a percent off, on both sides (measured:
+// docs/benchmarks.md, "Fast geodesic fields"). The probe decides most: the ray to c alone (probe 0)
+// stalls at every face whose middle corner faces the source, and 0.2% becomes 0.9%.
+//
+// Faces wait in Dial's buckets of width `bucket` mean edge lengths, first in first out within a bucket
+// (the default), or in a binary heap, by their source's distance at their centroid; a face improved
+// while it waits is handed on once, with its newest source. An accepted candidate is nearer at m by a
+// relative 1e-12, so the propagation ends. The order changes the fixed point little (0.224% either way).
+//
+// Edges are paired by their two vertices: an edge with one face is a boundary (no face across it), one
+// with three or more is refused. Vertices of other connected parts stay at infinity. Memory: 96 bytes a
+// half-edge (its unfolding), 24 a face, and per thread 32 a face and 8 a vertex.
+#include <nanobind/nanobind.h>
+#include <nanobind/ndarray.h>
+#include <nanobind/stl/string.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <cstdint>
+#include <functional>
+#include <limits>
+#include <queue>
+#include <stdexcept>
+#include <tuple>
+#include <string>
+#include <thread>
+#include <utility>
+#include <vector>
+
+namespace nb = nanobind;
+
+namespace {
+
+constexpr double INF = std::numeric_limits<double>::infinity();
+constexpr double SETTLED = 1e-12;  // relative: a smaller improvement does not queue a face again
+constexpr double ON_EDGE = 1e-12;  // relative to the edge's length: a source on the edge's line
+// A ray that meets the edge's line within SEEN edge lengths of an endpoint passes through the edge, and
+// a source bent at a vertex counts BENT relatively farther: where the source, the vertex and the face are
+// in line (a regular grid is full of such lines) the unbent source, which lights the faces beyond the
+// same way, wins the tie (without these, a flat grid is 3% off beyond its diagonals).
+constexpr double SEEN = 1e-9;
+constexpr double BENT = 1e-10;
+
+// Dial's buckets of width `width`, first in first out within a bucket; keys below the current bucket
+// go into it.
+class Buckets {
+public:
+    void reset(double width) {
+        for (auto& b : buckets_) b.clear();
+        width_ = width;
+        current_ = pos_ = 0;
+    }
+    void push(double key, int id) {
+        const double slot = key / width_;
+        const size_t b = std::max(current_, slot < 1e9 ? static_cast<size_t>(slot) : size_t(1e9));
+        if (b >= buckets_.size()) buckets_.resize(b + 1);
+        buckets_[b].emplace_back(key, id);
+    }
+    bool pop(double& key, int& id) {
+        for (; current_ < buckets_.size(); ++current_, pos_ = 0) {
+            auto& b = buckets_[current_];
+            if (pos_ < b.size()) {
+                std::tie(key, id) = b[pos_++];
+                return true;
+            }
+            b.clear();
+        }
+        return false;
+    }
+
+private:
+    std::vector<std::vector<std::pair<double, int>>> buckets_;
+    double width_ = 1.0;
+    size_t current_ = 0, pos_ = 0;
+};
+
+class Heap {
+public:
+    void reset(double) { heap_ = {}; }
+    void push(double key, int id) { heap_.emplace(key, id); }
+    bool pop(double& key, int& id) {
+        if (heap_.empty()) return false;
+        std::tie(key, id) = heap_.top();
+        heap_.pop();
+        return true;
+    }
+
+private:
+    std::priority_queue<std::pair<double, int>, std::vector<std::pair<double, int>>, std::greater<>> heap_;
+};
+
+struct Point {
+    double x, y;
+};
+inline double norm(double x, double y) { return std::sqrt(x * x + y * y); }
+inline double cross(Point o, Point a, Point b) { return (a.x - o.x) * (b.y - o.y) - (a.y - o.y) * (b.x - o.x); }
+
+// Half-edge h = 3 f + k (face f's edge from corner k to corner k + 1) and the face g across it, seen in
+// the frame of that edge in g: its start A at the origin, its end B at (L, 0), g's third vertex C at
+// (cx, cy), cy >= 0.
+struct Across {
+    double r00, r01, r10, r11, tx, ty;  // f's frame -> the edge's frame in g: (x, y) -> R (x, y) + t
+    double L, cx, cy;
+    int g = -1;                         // -1: a boundary (or degenerate) edge
+    int va, vb, vc;                     // the vertices at A, B and C
+    int kg;                             // the edge in g: from g's corner kg to kg + 1
+    Point map(Point p) const { return {r00 * p.x + r01 * p.y + tx, r10 * p.x + r11 * p.y + ty}; }
+};
+
+// What one source needs per face and vertex; one per thread.
+struct Source {
+    double x, y, sigma;  // in the face's frame
+    double best;         // its distance at the face's centroid
+};
+
+struct Workspace {
+    std::vector<Source> faces;
+    Buckets buckets;
+    Heap heap;
+    int64_t processed = 0;
+};
+
+class VirtualSources {
+public:
+    VirtualSources(const double* V, int64_t n, const int64_t* F, int64_t m) : n_(n), m_(m) {
+        if (n >= (int64_t(1) << 31) || 3 * m >= (int64_t(1) << 31))
+            throw std::invalid_argument("more than 2^31 vertices or face corners");
+        for (int64_t i = 0; i < 3 * n; ++i)
+            if (!std::isfinite(V[i])) throw std::invalid_argument("a vertex coordinate is not finite");
+        for (int64_t i = 0; i < 3 * m; ++i)
+            if (F[i] < 0 || F[i] >= n) throw std::invalid_argument("face index out of range");
+        F_.assign(F, F + 3 * m);
+        build_frames(V);
+        build_unfoldings();
+        build_vertex_faces();
+    }
+
+    int64_t n_vertices() const { return n_; }
+
+    template <class Q>
+    void distances(int source, double* d, Workspace& w, Q& queue, double bucket, double probe) const {
+        std::fill(d, d + n_, INF);
+        w.faces.assign(m_, Source{0.0, 0.0, INF, INF});
+        queue.reset(bucket * mean_edge_);
+        d[source] = 0.0;
+        for (int i = vf_start_[source]; i < vf_start_[source + 1]; ++i) {
+            const int f = vf_[i] / 3, k = vf_[i] % 3;
+            const Point s = corner(f, k);
+            for (int j = 0; j < 3; ++j) {
+                const Point p = corner(f, j);
+                d[F_[3 * f + j]] = std::min(d[F_[3 * f + j]], norm(p.x - s.x, p.y - s.y));
+            }
+            const Point m = centroid(f);
+            w.faces[f] = {s.x, s.y, 0.0, norm(m.x - s.x, m.y - s.y)};
+            queue.push(w.faces[f].best, f);
+        }
+        for (double key; true;) {
+            int f;
+            if (!queue.pop(key, f)) break;
+            if (key > w.faces[f].best) continue;  // a newer source of f is queued
+            ++w.processed;
+            hand_on(f, d, w, queue, probe);
+        }
+    }
+
+private:
+    int64_t n_, m_;
+    std::vector<int> F_;
+    std::vector<double> frame_;        // per face: corner 1's x, corner 2's x and y (corner 0 at the origin)
+    std::vector<Across> across_;       // per half-edge
+    std::vector<int> vf_start_, vf_;   // per vertex: its faces' corners 3 f + k (CSR)
+    double mean_edge_ = 1.0;
+
+    Point corner(int f, int k) const {
+        const double* q = &frame_[3 * f];
+        return k == 0 ? Point{0.0, 0.0} : (k == 1 ? Point{q[0], 0.0} : Point{q[1], q[2]});
+    }
+    Point centroid(int f) const {
+        const double* q = &frame_[3 * f];
+        return {(q[0] + q[1]) / 3.0, q[2] / 3.0};
+    }
+
+    // Face f hands its source to the faces across its three edges (in each edge's frame in the face g
+    // across it: A = (0, 0), B = (L, 0), C = (cx, cy) above).
+    template <class Q>
+    void hand_on(int f, double* d, Workspace& w, Q& queue, double probe) const {
+        const Source from = w.faces[f];
+        for (int k = 0; k < 3; ++k) {
+            const Across& u = across_[3 * f + k];
+            if (u.g < 0) continue;
+            const double L = u.L, cx = u.cx, cy = u.cy, mx = (L + cx) / 3.0, my = cy / 3.0;
+            Point t = u.map({from.x, from.y});
+            double sigma = from.sigma;
+            // where the rays from the source to C and to the probe point meet the edge's line; a source
+            // on C's side sees nothing through the edge: bend at the endpoint nearer g's centroid
+            double c_x, p_x;
+            if (t.y > ON_EDGE * L) {
+                const bool at_a = d[u.va] + norm(mx, my) <= d[u.vb] + norm(mx - L, my);
+                c_x = p_x = at_a ? -1.0 : 2.0 * L + 1.0;
+                t = {at_a ? 0.0 : L, 0.0};
+                sigma = d[at_a ? u.va : u.vb];
+            } else if (t.y >= -ON_EDGE * L) {
+                c_x = p_x = t.x;
+            } else {
+                const double px = cx + probe * (mx - cx), py = cy + probe * (my - cy);
+                c_x = t.x - (cx - t.x) * t.y / (cy - t.y);
+                p_x = t.x - (px - t.x) * t.y / (py - t.y);
+            }
+            // C: straight where seen through the edge, else around the endpoint the ray passes
+            const double lo = -SEEN * L, hi = L * (1.0 + SEEN);
+            double to_c;
+            if (c_x >= lo && c_x <= hi) {
+                to_c = sigma + norm(cx - t.x, cy - t.y);
+            } else {
+                const double ex = c_x > L ? L : 0.0;
+                to_c = sigma + norm(ex - t.x, t.y) + norm(cx - ex, cy);
+            }
+            if (to_c < d[u.vc]) d[u.vc] = to_c;
+            double tie = 1.0;
+            if (!(p_x >= lo && p_x <= hi)) {  // g's source: the endpoint the ray passes
+                const bool at_b = p_x > L;
+                t = {at_b ? L : 0.0, 0.0};
+                sigma = d[at_b ? u.vb : u.va];
+                if (!(sigma < INF)) continue;
+                tie = 1.0 + BENT;
+            }
+            const double at_m = (sigma + norm(mx - t.x, my - t.y)) * tie;
+            Source& to = w.faces[u.g];
+            if (at_m < to.best * (1.0 - SETTLED)) {  // into g's frame
+                const Point a = corner(u.g, u.kg), b = corner(u.g, (u.kg + 1) % 3);
+                const double ex = (b.x - a.x) / L, ey = (b.y - a.y) / L;
+                to = {a.x + t.x * ex - t.y * ey, a.y + t.x * ey + t.y * ex, sigma, at_m};
+                queue.push(at_m, u.g);
+            }
+        }
+    }
+
+    void build_frames(const double* V) {
+        frame_.resize(3 * m_);
+        double total = 0.0;
+        for (int64_t f = 0; f < m_; ++f) {
+            const double* p0 = &V[3 * F_[3 * f]];
+            const double* p1 = &V[3 * F_[3 * f + 1]];
+            const double* p2 = &V[3 * F_[3 * f + 2]];
+            double e[3], g[3];
+            for (int i = 0; i < 3; ++i) e[i] = p1[i] - p0[i], g[i] = p2[i] - p0[i];
+            const double l01 = std::sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]);
+            const double l02 = std::sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
+            const double dot = e[0] * g[0] + e[1] * g[1] + e[2] * g[2];
+            const double n0 = e[1] * g[2] - e[2] * g[1], n1 = e[2] * g[0] - e[0] * g[2], n2 = e[0] * g[1] - e[1] * g[0];
+            const double area2 = std::sqrt(n0 * n0 + n1 * n1 + n2 * n2);
+            double* q = &frame_[3 * f];
+            if (l01 > 0.0)
+                q[0] = l01, q[1] = dot / l01, q[2] = area2 / l01;
+            else
+                q[0] = 0.0, q[1] = l02, q[2] = 0.0;
+            total += l01;
+        }
+        mean_edge_ = m_ > 0 && total > 0.0 ? total / m_ : 1.0;
+    }
+
+    void build_unfoldings() {
+        std::vector<std::pair<std::pair<int, int>, int>> keys(3 * m_);
+        for (int h = 0; h < 3 * m_; ++h) {
+            const int a = F_[h], b = F_[h % 3 == 2 ? h - 2 : h + 1];
+            keys[h] = {{std::min(a, b), std::max(a, b)}, h};
+        }
+        std::sort(keys.begin(), keys.end());
+        across_.assign(3 * m_, Across{});
+        int64_t non_manifold = 0;
+        for (size_t i = 0; i < keys.size();) {
+            size_t j = i;
+            while (j < keys.size() && keys[j].first == keys[i].first) ++j;
+            if (j - i > 2) ++non_manifold;
+            if (j - i == 2 && keys[i].first.first != keys[i].first.second) {
+                link(keys[i].second, keys[i + 1].second);
+                link(keys[i + 1].second, keys[i].second);
+            }
+            i = j;
+        }
+        if (non_manifold > 0)
+            throw std::invalid_argument(std::to_string(non_manifold) + " non-manifold edges (three or more faces)");
+    }
+
+    // The unfolding of half-edge h's face into the frame of the same edge in the face of half-edge o, its
+    // twin (or its equal, where the two faces are oriented against each other).
+    void link(int h, int o) {
+        const int f = h / 3, k = h % 3, g = o / 3, kg = o % 3;
+        Across& u = across_[h];
+        const Point pa = corner(f, k), pb = corner(f, (k + 1) % 3);
+        const Point qa = corner(g, kg), qb = corner(g, (kg + 1) % 3), qc = corner(g, (kg + 2) % 3);
+        const double lp = norm(pb.x - pa.x, pb.y - pa.y), L = norm(qb.x - qa.x, qb.y - qa.y);
+        if (!(lp > 0.0) || !(L > 0.0)) return;  // a degenerate edge hands nothing on
+        // g's edge frame: x along qa -> qb, y toward g's third corner (the face's corners run
+        // counter-clockwise in its frame); f's third corner goes to y < 0
+        const double gx = (qb.x - qa.x) / L, gy = (qb.y - qa.y) / L;
+        u.L = L;
+        u.cx = (qc.x - qa.x) * gx + (qc.y - qa.y) * gy;
+        u.cy = std::max(0.0, -(qc.x - qa.x) * gy + (qc.y - qa.y) * gx);
+        // f's edge: unit e along pa -> pb, n toward f's third corner (to the left of the edge)
+        const double ex = (pb.x - pa.x) / lp, ey = (pb.y - pa.y) / lp, nx = -ey, ny = ex;
+        // the shared edge's start in f (vertex F[h]) is g's qa (opposite orientations: the usual case)
+        // or g's qb (equal orientations); in g's edge frame x runs from qa
+        const bool same = F_[h] == F_[o];
+        const double sx = same ? 1.0 : -1.0, ox = same ? 0.0 : L;
+        // X -> (ox + sx (X - pa).e, -(X - pa).n)
+        u.r00 = sx * ex, u.r01 = sx * ey, u.r10 = -nx, u.r11 = -ny;
+        u.tx = ox - (u.r00 * pa.x + u.r01 * pa.y);
+        u.ty = -(u.r10 * pa.x + u.r11 * pa.y);
+        u.g = g, u.kg = kg;
+        u.va = F_[o], u.vb = F_[3 * g + (kg + 1) % 3], u.vc = F_[3 * g + (kg + 2) % 3];
+    }
+
+    void build_vertex_faces() {
+        vf_start_.assign(n_ + 1, 0);
+        for (int h = 0; h < 3 * m_; ++h) ++vf_start_[F_[h] + 1];
+        for (int64_t v = 0; v < n_; ++v) vf_start_[v + 1] += vf_start_[v];
+        vf_.resize(3 * m_);
+        std::vector<int> fill(vf_start_.begin(), vf_start_.end() - 1);
+        for (int h = 0; h < 3 * m_; ++h) vf_[fill[F_[h]]++] = h;
+    }
+};
+
+using Vertices = nb::ndarray<const double, nb::shape<-1, 3>, nb::c_contig, nb::device::cpu>;
+using Faces = nb::ndarray<const int64_t, nb::shape<-1, 3>, nb::c_contig, nb::device::cpu>;
+using Sources = nb::ndarray<const int64_t, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
+using Out = nb::ndarray<nb::numpy, double, nb::ndim<2>>;
+
+// The fields of all sources (one row each), over `threads` threads taking sources in turn; each
+// source's field depends on nothing but the source, so the result does not depend on the thread count.
+Out solve(const VirtualSources& surface, const Sources& sources, int64_t threads, const std::string& queue_kind,
+          double bucket, double probe, int64_t* processed_total) {
+    const size_t k = sources.shape(0), n = static_cast<size_t>(surface.n_vertices());
+    const int64_t* src = sources.data();
+    for (size_t i = 0; i < k; ++i)
+        if (src[i] < 0 || src[i] >= surface.n_vertices()) throw std::invalid_argument("source vertex out of range");
+    if (queue_kind != "buckets" && queue_kind != "heap") throw std::invalid_argument("queue: 'buckets' or 'heap'");
+    if (!(bucket > 0.0)) throw std::invalid_argument("bucket width must be positive");
+    double* out = new double[std::max<size_t>(k * n, 1)];
+    nb::capsule owner(out, [](void* p) noexcept { delete[] static_cast<double*>(p); });
+    std::atomic<int64_t> processed{0};
+    {
+        nb::gil_scoped_release release;
+        std::atomic<size_t> next{0};
+        auto work = [&]() {
+            Workspace w;
+            for (size_t i; (i = next++) < k;) {
+                if (queue_kind == "heap")
+                    surface.distances(static_cast<int>(src[i]), out + i * n, w, w.heap, bucket, probe);
+                else
+                    surface.distances(static_cast<int>(src[i]), out + i * n, w, w.buckets, bucket, probe);
+            }
+            processed += w.processed;
+        };
+        const int64_t team = std::max<int64_t>(1, std::min<int64_t>(threads, static_cast<int64_t>(k)));
+        std::vector<std::thread> helpers;
+        for (int64_t t = 1; t < team; ++t) helpers.emplace_back(work);
+        work();
+        for (auto& h : helpers) h.join();
+    }
+    if (processed_total) *processed_total = processed;
+    return Out(out, {k, n}, owner);
+}
+
+}  // namespace
+
+NB_MODULE(_virtual_source_geodesic, m) {
+    m.doc() = "Approximate geodesic distances by virtual source propagation (see src/virtual_source_geodesic.cpp).";
+    nb::class_<VirtualSources>(m, "VirtualSources")
+        .def(
+            "__init__",
+            [](VirtualSources* self, Vertices V, Faces F) { new (self) VirtualSources(V.data(), V.shape(0), F.data(), F.shape(0)); },
+            nb::arg("vertices"), nb::arg("faces"),
+            "Precompute a mesh: vertices (N, 3) float64 and faces (M, 3) int64, both C-contiguous.")
+        .def("n_vertices", &VirtualSources::n_vertices)
+        .def(
+            "distances",
+            [](const VirtualSources& self, Sources sources, int64_t threads, const std::string& queue, double bucket,
+               double probe) { return solve(self, sources, threads, queue, bucket, probe, nullptr); },
+            nb::arg("sources"), nb::arg("threads") = 1, nb::arg("queue") = "buckets", nb::arg("bucket") = 0.5,
+            nb::arg("probe") = 1.0,
+            "Distances (len(sources), N) float64 from each source vertex to every vertex; inf where unreached.\n"
+            "queue, bucket (width in mean edge lengths), probe (the visibility test point, 0: the vertex itself,\n"
+            "1: the face's centroid) are the design choices the benchmark ablates.")
+        .def(
+            "processed",
+            [](const VirtualSources& self, Sources sources, const std::string& queue, double bucket, double probe) {
+                int64_t total = 0;
+                solve(self, sources, 1, queue, bucket, probe, &total);
+                return total;
+            },
+            nb::arg("sources"), nb::arg("queue") = "buckets", nb::arg("bucket") = 0.5, nb::arg("probe") = 1.0,
+            "How many vertices the queue gave out over all sources (the vertex count, if none twice).");
+}
