@@ -6,7 +6,7 @@ from collections import defaultdict
 
 from geodata import store
 
-__all__ = ["read_attrs", "fates", "orphans", "orphan_rows", "REMOVE_ORPHANS"]
+__all__ = ["read_attrs", "CaseFoldedListing", "fates", "orphans", "orphan_rows", "REMOVE_ORPHANS"]
 
 
 def read_attrs(out, meshes: dict, damaged: dict | None = None) -> dict[str, dict]:
@@ -27,20 +27,46 @@ def read_attrs(out, meshes: dict, damaged: dict | None = None) -> dict[str, dict
     return {k: a for k, a in found.items() if isinstance(a, dict)}
 
 
+class CaseFoldedListing(dict):
+    """A listing of meshes/ (or failed/) that finds a name as the filesystem would on a case-insensitive one:
+    exactly where the name is there, else by its case-folded form. Ids differing only in case share their
+    hash digits (hex is lower case), so they are byte copies: never two different meshes."""
+
+    def __init__(self, listing):
+        super().__init__(listing)
+        self.folded = {}
+        for name in sorted(listing):
+            self.folded.setdefault(name.casefold(), name)
+
+    def name(self, name: str) -> str:
+        """The listed name this name is found under (itself where it is not listed)."""
+        return name if dict.__contains__(self, name) else self.folded.get(name.casefold(), name)
+
+    def __contains__(self, name) -> bool:
+        return dict.__contains__(self, self.name(name))
+
+    def __getitem__(self, name):
+        return dict.__getitem__(self, self.name(name))
+
+
 def fates(ledgers: dict, meshes: dict, attrs: dict, failures: dict, damaged: dict | None = None) -> list[dict]:
     """The fate of every input file in the runs' ledgers: ok (the source its published mesh records),
     duplicate (a byte copy of the same file name: the mesh records another source), failed (the mesh's
     failure record), damaged (its mesh's zip cannot be read: a rerun redoes it), pending. A byte copy under
-    another file name is a mesh of its own: its detail says so."""
+    another file name is a mesh of its own: its detail says so. On a case-insensitive filesystem (macOS,
+    Windows) ids that differ only in case (byte copies Chair.obj and chair.obj) are one file, listed under the
+    first writer's name: the other input is its duplicate (:class:`CaseFoldedListing`)."""
     damaged = damaged or {}
+    meshes, failures = CaseFoldedListing(meshes), CaseFoldedListing(failures)
     published_as = defaultdict(set)  # byte copies under another file name are meshes of their own
     for entry in ledgers.values():
         if entry["mesh_id"] in meshes:
-            published_as[entry["sha256"]].add(entry["mesh_id"])
+            published_as[entry["sha256"]].add(meshes.name(entry["mesh_id"]))
     rows = []
     for (root, source), entry in sorted(ledgers.items(), key=lambda kv: kv[0][1]):
-        mesh_id = entry["mesh_id"]
-        row = {"source": source, "sha256": entry["sha256"], "mesh_id": mesh_id, "fate": "pending", "detail": ""}
+        mesh_id = meshes.name(entry["mesh_id"])
+        row = {"source": source, "sha256": entry["sha256"], "mesh_id": entry["mesh_id"], "fate": "pending",
+               "detail": ""}
         if mesh_id in damaged:
             row.update(fate="damaged", detail=f"{damaged[mesh_id]}: a rerun of prepare redoes it")
         elif mesh_id in meshes:
@@ -50,8 +76,9 @@ def fates(ledgers: dict, meshes: dict, attrs: dict, failures: dict, damaged: dic
             else:
                 others = sorted(published_as[entry["sha256"]] - {mesh_id})
                 row.update(fate="ok", detail=f"same bytes as {', '.join(others)}" if others else "")
-        elif mesh_id in failures:
-            row.update(fate="failed", detail=f"[{failures[mesh_id].get('stage')}] {failures[mesh_id].get('error')}")
+        elif entry["mesh_id"] in failures:
+            failure = failures[entry["mesh_id"]]
+            row.update(fate="failed", detail=f"[{failure.get('stage')}] {failure.get('error')}")
         rows.append(row)
     return rows
 
@@ -65,8 +92,8 @@ def orphans(ledgers: dict, meshes) -> list[str]:
     tell)."""
     if not ledgers:
         return []
-    mapped = {entry["mesh_id"] for entry in ledgers.values()}
-    return sorted(m for m in meshes if m not in mapped)
+    mapped = {entry["mesh_id"].casefold() for entry in ledgers.values()}  # one file where names fold (fates)
+    return sorted(m for m in meshes if m.casefold() not in mapped)
 
 
 def orphan_rows(orphaned: list[str], attrs: dict) -> list[dict]:

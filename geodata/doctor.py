@@ -64,8 +64,8 @@ def examine(out, progress=None) -> list[Finding]:
     meshes = {m: set() for m, sub in zips if sub is None and f"meshes/{m}.zip" not in bad}
     for mesh_id, sub in zips:
         if sub is not None and mesh_id not in meshes and f"meshes/{mesh_id}.zip" not in bad:
-            findings.append(Finding("unaccounted", f"meshes/{mesh_id}.{sub}.zip", f"its mesh {mesh_id} is not published",
-                                    "delete it while no run writes the store"))
+            findings.append(Finding("unaccounted", f"meshes/{mesh_id}.{sub}.zip",
+                                    f"its mesh {mesh_id} is not published", "delete it while no run writes the store"))
     findings += [Finding("unaccounted", f"meshes/{name}", "not a file of the store",
                          "move it elsewhere (a store's meshes/ holds zips alone)") for name in strays]
     _, broken = store.read_ledger_files(out)

@@ -29,9 +29,10 @@ from pathlib import Path
 import numpy as np
 import zarr
 
-__all__ = ["StoreError", "DamagedMeshError", "FORMAT", "SUBGROUPS", "create_store", "open_store", "geometry_key", "mesh_file", "publish", "write_mesh",
-           "read_mesh", "mesh_attrs", "list_meshes", "record_failure", "clear_failure", "list_failures",
-           "write_ledger", "read_ledgers", "read_ledger_files", "legacy_ids", "UPGRADE_LEDGER", "temporary_files", "damage", "remove_damaged"]
+__all__ = ["StoreError", "DamagedMeshError", "FORMAT", "SUBGROUPS", "create_store", "open_store", "geometry_key",
+           "mesh_file", "temporary_name", "publish", "write_mesh", "read_mesh", "damage", "remove_damaged", "mesh_attrs",
+           "list_meshes", "record_failure", "clear_failure", "list_failures", "write_ledger", "read_ledgers",
+           "read_ledger_files", "legacy_ids", "UPGRADE_LEDGER", "temporary_files"]
 
 FORMAT = 2  # 1: one zarr group per mesh (~14-20 files a mesh), before 2026-11-26
 SUBGROUPS = ("biharmonic", "points")

@@ -252,3 +252,25 @@ def test_a_zip_damaged_inside_is_found_by_verify_and_removed_for_a_rerun(tmp_pat
     assert f"removed: meshes/{mesh_id}.zip" in removed and "unaccounted: ball.obj" in removed  # to do again
     run("prepare", raw, out, *ARGS)
     assert "0 damaged, 0 orphan, 0 duplicated, 0 unaccounted" in run("verify", out).output
+
+
+def test_ids_that_differ_only_in_case_are_one_file_on_a_case_insensitive_filesystem():
+    """Byte copies Chair.obj and sub/chair.obj get ids that differ only in case: one file on macOS or Windows,
+    where meshes/ lists the first one's name alone. The second input is its duplicate, not pending forever, and
+    the mesh is no orphan."""
+    from geodata.accounting import fates, orphans
+
+    digest = "ab" * 32
+    upper, lower = f"Chair-{digest[:32]}", f"chair-{digest[:32]}"
+    ledgers = {("/raw", "Chair.obj"): {"sha256": digest, "mesh_id": upper},
+               ("/raw", "sub/chair.obj"): {"sha256": digest, "mesh_id": lower}}
+    meshes = {upper: set()}  # what a case-insensitive filesystem holds: one name
+    rows = {r["source"]: r for r in fates(ledgers, meshes, {upper: {"source": "Chair.obj"}}, {})}
+    assert rows["Chair.obj"]["fate"] == "ok"
+    assert rows["sub/chair.obj"]["fate"] == "duplicate" and upper in rows["sub/chair.obj"]["detail"]
+    assert orphans(ledgers, meshes) == []
+    failed = fates(ledgers, {}, {}, {upper: {"stage": "load", "error": "empty file"}})
+    assert [r["fate"] for r in failed] == ["failed", "failed"]
+    both = {upper: set(), lower: set()}  # a case-sensitive filesystem: two meshes, each its own input's
+    rows = fates(ledgers, both, {upper: {"source": "Chair.obj"}, lower: {"source": "sub/chair.obj"}}, {})
+    assert [r["fate"] for r in rows] == ["ok", "ok"]
