@@ -8,9 +8,10 @@ Layout (a contract, docs/store.md)::
     OUT/failed/<name>/                attrs only: source, stage, error (name: a mesh id, or <mesh_id>.<sub>)
     OUT/sources/<ledger>.json         what each prepare run found: source path -> sha256, mesh id
 
-A file is written under a temporary name in its folder and published with ``os.link`` (which refuses to
-replace an existing name): a mesh exists completely or not at all, a published one is never rewritten,
-and a killed writer leaves only a temporary file. Many processes may write one store at once: each
+A file is written under a temporary name in its folder, flushed to disk and published with ``os.link`` (which
+refuses to replace an existing name; without hard links, a rename that never replaces): a mesh exists completely
+or not at all, a published one is never rewritten (one found damaged is removed and redone), and a killed
+writer leaves only a temporary file. Many processes may write one store at once: each
 publishes only its own meshes, and the shared folders are made once, before any worker starts
 (concurrent zarr group creation races, zarr-python#1435). Few files per mesh (1 to 3) keep a store of
 50k meshes within the file-count quotas of HPC project spaces. Local (POSIX) filesystems only.
@@ -30,9 +31,9 @@ import numpy as np
 import zarr
 
 __all__ = ["StoreError", "DamagedMeshError", "FORMAT", "SUBGROUPS", "create_store", "open_store", "geometry_key",
-           "mesh_file", "temporary_name", "publish", "write_mesh", "read_mesh", "damage", "remove_damaged", "mesh_attrs",
-           "list_meshes", "record_failure", "clear_failure", "list_failures", "write_ledger", "read_ledgers",
-           "read_ledger_files", "legacy_ids", "UPGRADE_LEDGER", "temporary_files"]
+           "mesh_file", "temporary_name", "publish", "write_mesh", "read_mesh", "damage", "remove_damaged",
+           "mesh_attrs", "list_meshes", "record_failure", "clear_failure", "list_failures", "write_ledger",
+           "read_ledgers", "read_ledger_files", "legacy_ids", "UPGRADE_LEDGER", "temporary_files"]
 
 FORMAT = 2  # 1: one zarr group per mesh (~14-20 files a mesh), before 2026-11-26
 SUBGROUPS = ("biharmonic", "points")
@@ -133,14 +134,62 @@ def publish(tmp: Path, final: Path) -> bool:
         return True
     except FileExistsError:
         return False
-    except OSError:  # a filesystem without hard links: rename, atomic too (but it may replace)
-        if final.exists():
-            return False
-        os.replace(tmp, final)
-        return True
+    except OSError:  # a filesystem without hard links (SMB, some FUSE mounts)
+        return _rename_noreplace(Path(tmp), Path(final))
     finally:
         with contextlib.suppress(FileNotFoundError):
             tmp.unlink()
+
+
+def _native_rename_noreplace():
+    """The C library's rename that fails where the target exists, as ``f(src, dst) -> 0 or -1`` (errno set), or
+    None: renameat2(RENAME_NOREPLACE) (Linux, glibc >= 2.28) or renamex_np(RENAME_EXCL) (macOS)."""
+    import ctypes
+    import ctypes.util
+    import sys
+
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c"), use_errno=True)
+        if sys.platform.startswith("linux"):
+            at_fdcwd, noreplace, fn = -100, 1, libc.renameat2
+            return lambda src, dst: fn(at_fdcwd, os.fsencode(src), at_fdcwd, os.fsencode(dst), noreplace)
+        if sys.platform == "darwin":
+            excl, fn = 4, libc.renamex_np
+            return lambda src, dst: fn(os.fsencode(src), os.fsencode(dst), excl)
+    except (OSError, AttributeError, TypeError):
+        pass
+    return None
+
+
+def _rename_noreplace(tmp: Path, final: Path) -> bool:
+    """Rename ``tmp`` to ``final`` unless that exists, atomically against other writers; True when renamed. Windows'
+    rename never replaces; elsewhere the C library's no-replace rename where the filesystem has it; else the
+    name is claimed first (an empty file made with O_EXCL, which one writer alone can) and the file moved onto
+    it: a writer killed in between leaves that empty file, which the next run finds damaged and redoes."""
+    import ctypes
+    import errno
+
+    if os.name == "nt":
+        try:
+            os.rename(tmp, final)
+            return True
+        except FileExistsError:
+            return False
+    native = _native_rename_noreplace()
+    if native is not None:
+        if native(tmp, final) == 0:
+            return True
+        code = ctypes.get_errno()
+        if code == errno.EEXIST:
+            return False
+        if code not in (errno.EINVAL, errno.ENOSYS, errno.ENOTSUP, errno.EOPNOTSUPP, errno.EPERM):
+            raise OSError(code, os.strerror(code), str(final))
+    try:
+        os.close(os.open(final, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644))
+    except FileExistsError:
+        return False
+    os.replace(tmp, final)
+    return True
 
 
 def write_mesh(out: str | Path, mesh_id: str, arrays: dict[str, np.ndarray], attrs: dict,

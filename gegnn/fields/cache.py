@@ -39,13 +39,12 @@ import io
 import json
 import multiprocessing
 import os
-import socket
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from geodata.store import publish
+from geodata.store import publish, temporary_name
 
 from .landmarks import FPS_BATCH, landmark_solver
 from .spectral import spectral_codes
@@ -161,13 +160,18 @@ class FieldCache:
         return self.entry(key, seed).exists()
 
     def get(self, key: str, seed: int) -> np.ndarray | None:
-        """The fields float32, or None where they were never published."""
+        """The fields float32, or None where they were never published (or their name is claimed by a writer
+        on a filesystem without hard links: an empty file, :func:`geodata.store.publish`)."""
         if not self._checked:
             self.create()
         try:
             return np.load(self.entry(key, seed), allow_pickle=False).astype(np.float32)
         except FileNotFoundError:
             return None
+        except EOFError:
+            if self.entry(key, seed).stat().st_size == 0:
+                return None
+            raise
 
     def put(self, key: str, seed: int, fields: np.ndarray) -> bool:
         """Publish the fields unless they already are; True when this call published them."""
@@ -254,7 +258,7 @@ def _publish_bytes(path: Path, data: bytes) -> bool:
     """Write ``data`` to a temporary file beside ``path`` (flushed to disk: a node that fails later leaves no
     named empty file), then give it ``path`` as the store's meshes get theirs (:func:`geodata.store.publish`:
     the first writer wins and the file is never rewritten). True when this call published."""
-    tmp = path.with_name(f".{path.name}.{socket.gethostname()}.{os.getpid()}.tmp")
+    tmp = temporary_name(path)  # unique also among containers sharing a hostname and pid numbers
     with open(tmp, "wb") as f:
         f.write(data)
         f.flush()

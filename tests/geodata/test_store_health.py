@@ -186,7 +186,8 @@ def test_preparing_into_an_upgraded_store_publishes_no_file_twice(tmp_path):
     v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], np.float32)
     f = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], np.int32)
     for name, a in {"vertices": v, "faces": f, "normals": v, "edges": f[:, :2],
-                    "geodesic/pairs": np.zeros((1, 2), np.uint32), "geodesic/distances": np.ones(1, np.float32)}.items():
+                    "geodesic/pairs": np.zeros((1, 2), np.uint32),
+                    "geodesic/distances": np.ones(1, np.float32)}.items():
         g.create_array(name, data=a)
     g.attrs.update(source="ball.obj", sha256=digest, status="ok")
     run("upgrade", old, new)
@@ -222,7 +223,8 @@ def test_verify_names_one_of_each_problem_and_a_rerun_redoes_the_damaged(tmp_pat
     lines = result.output.splitlines()
     assert f"verify {out}: 1 damaged, 1 orphan, 1 duplicated, 1 unaccounted" in lines
     assert any(line.startswith(f"damaged: meshes/{egg}.zip") and "geodata prepare" in line for line in lines)
-    assert any(line.startswith(f"orphan: meshes/{ids['ball.obj']}.zip") and "--remove-orphans" in line for line in lines)
+    assert any(line.startswith(f"orphan: meshes/{ids['ball.obj']}.zip") and "--remove-orphans" in line
+               for line in lines)
     assert any(line.startswith("duplicated: meshes/cube-0123abcd.zip, ") and ids["cube.obj"] in line for line in lines)
     assert any(line.startswith("unaccounted: gone.obj") for line in lines)
     run("prepare", raw, out, *ARGS)  # redoes the damaged mesh
@@ -274,3 +276,50 @@ def test_ids_that_differ_only_in_case_are_one_file_on_a_case_insensitive_filesys
     both = {upper: set(), lower: set()}  # a case-sensitive filesystem: two meshes, each its own input's
     rows = fates(ledgers, both, {upper: {"source": "Chair.obj"}, lower: {"source": "sub/chair.obj"}}, {})
     assert [r["fate"] for r in rows] == ["ok", "ok"]
+
+
+@pytest.mark.parametrize("native_rename", [True, False])
+def test_publish_without_hard_links_never_replaces_a_published_file(tmp_path, monkeypatch, native_rename):
+    """On a filesystem without hard links (SMB, some FUSE mounts: link fails with EPERM) publication is still
+    first-writer-wins against writers racing for the name: a no-replace rename (renameat2, renamex_np, Windows'
+    rename) or, without one, a name claimed with O_EXCL before the file is moved onto it."""
+    import errno
+    import pathlib
+    import threading
+    import time
+
+    def no_link(src, dst):
+        raise PermissionError(errno.EPERM, "Operation not permitted")
+
+    monkeypatch.setattr(os, "link", no_link)
+    if not native_rename:
+        monkeypatch.setattr(store, "_native_rename_noreplace", lambda: None)
+    real_exists = pathlib.Path.exists
+    monkeypatch.setattr(pathlib.Path, "exists", lambda self, **kw: time.sleep(0.05) or real_exists(self, **kw))
+    final = tmp_path / "m.zip"
+    tmps = [tmp_path / f".m.zip.{i}.tmp" for i in range(8)]
+    for i, tmp in enumerate(tmps):
+        tmp.write_bytes(b"writer %d" % i)
+    results = [None] * len(tmps)
+    barrier = threading.Barrier(len(tmps))
+
+    def writer(i):
+        barrier.wait()
+        results[i] = store.publish(tmps[i], final)
+
+    threads = [threading.Thread(target=writer, args=(i,)) for i in range(len(tmps))]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert sum(results) == 1 and final.read_bytes() == b"writer %d" % results.index(True)
+    assert not any(real_exists(t) for t in tmps)
+
+
+def test_temporary_names_differ_between_containers_with_one_hostname_and_pid(monkeypatch):
+    import socket
+
+    monkeypatch.setattr(socket, "gethostname", lambda: "node")
+    monkeypatch.setattr(os, "getpid", lambda: 1)
+    names = {store.temporary_name(store.mesh_file("out", "m")) for _ in range(100)}
+    assert len(names) == 100 and all(n.name.startswith(".m.zip.node.1.") and n.suffix == ".tmp" for n in names)
