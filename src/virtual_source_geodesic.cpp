@@ -119,6 +119,35 @@ struct Point {
 inline double norm(double x, double y) { return std::sqrt(x * x + y * y); }
 inline double cross(Point o, Point a, Point b) { return (a.x - o.x) * (b.y - o.y) - (a.y - o.y) * (b.x - o.x); }
 
+// The faces (M, 3) sorted by the Morton code of their centroids (21 bits an axis over the bounding box).
+inline std::vector<int> morton_order(const double* V, int64_t n, const int64_t* F, int64_t m) {
+    double lo[3] = {INF, INF, INF}, hi[3] = {-INF, -INF, -INF};
+    for (int64_t i = 0; i < n; ++i)
+        for (int k = 0; k < 3; ++k) lo[k] = std::min(lo[k], V[3 * i + k]), hi[k] = std::max(hi[k], V[3 * i + k]);
+    auto spread = [](uint64_t x) {  // the 21 bits of x to every third bit
+        x &= 0x1fffff;
+        x = (x | x << 32) & 0x1f00000000ffffULL;
+        x = (x | x << 16) & 0x1f0000ff0000ffULL;
+        x = (x | x << 8) & 0x100f00f00f00f00fULL;
+        x = (x | x << 4) & 0x10c30c30c30c30c3ULL;
+        return (x | x << 2) & 0x1249249249249249ULL;
+    };
+    std::vector<std::pair<uint64_t, int>> keys(m);
+    for (int64_t f = 0; f < m; ++f) {
+        uint64_t code = 0;
+        for (int k = 0; k < 3; ++k) {
+            const double c = (V[3 * F[3 * f] + k] + V[3 * F[3 * f + 1] + k] + V[3 * F[3 * f + 2] + k]) / 3.0;
+            const double unit = hi[k] > lo[k] ? (c - lo[k]) / (hi[k] - lo[k]) : 0.0;
+            code |= spread(static_cast<uint64_t>(unit * 2097151.0)) << k;
+        }
+        keys[f] = {code, static_cast<int>(f)};
+    }
+    std::sort(keys.begin(), keys.end());
+    std::vector<int> order(m);
+    for (int64_t f = 0; f < m; ++f) order[f] = keys[f].second;
+    return order;
+}
+
 // Half-edge h = 3 f + k (face f's edge from corner k to corner k + 1) and the face g across it, seen in
 // the frame of that edge in g: its start A at the origin, its end B at (L, 0), g's third vertex C at
 // (cx, cy), cy >= 0.
@@ -135,9 +164,11 @@ struct Across {
 struct Source {
     double x, y, sigma;  // in the face's frame
     double best;         // its distance at the face's centroid
+    int entered;         // the edge it came through, which it is not handed back across (-1: none)
 };
 
 struct Workspace {
+    std::vector<double> d;  // per vertex, in the solver's numbering
     std::vector<Source> faces;
     Buckets buckets;
     Heap heap;
@@ -153,8 +184,25 @@ public:
             if (!std::isfinite(V[i])) throw std::invalid_argument("a vertex coordinate is not finite");
         for (int64_t i = 0; i < 3 * m; ++i)
             if (F[i] < 0 || F[i] >= n) throw std::invalid_argument("face index out of range");
-        F_.assign(F, F + 3 * m);
-        build_frames(V);
+        // Faces in the order of their centroids along a Morton curve, vertices in the order the faces
+        // first use them: neighbours sit close in memory, whatever the caller's order (84k vertices: 73 ms
+        // a field in trimesh's order of a subdivided mesh, 125 ms shuffled, 47 ms either way sorted)
+        const std::vector<int> faces = morton_order(V, n, F, m);
+        new_of_old_.assign(n, -1);
+        old_of_new_.reserve(n);
+        F_.resize(3 * m);
+        for (int64_t i = 0; i < m; ++i)
+            for (int k = 0; k < 3; ++k) {
+                const int64_t v = F[3 * faces[i] + k];
+                if (new_of_old_[v] < 0) new_of_old_[v] = static_cast<int>(old_of_new_.size()), old_of_new_.push_back(v);
+                F_[3 * i + k] = new_of_old_[v];
+            }
+        for (int64_t v = 0; v < n; ++v)
+            if (new_of_old_[v] < 0) new_of_old_[v] = static_cast<int>(old_of_new_.size()), old_of_new_.push_back(v);
+        std::vector<double> positions(3 * n);
+        for (int64_t i = 0; i < n; ++i)
+            for (int k = 0; k < 3; ++k) positions[3 * i + k] = V[3 * old_of_new_[i] + k];
+        build_frames(positions.data());
         build_unfoldings();
         build_vertex_faces();
     }
@@ -162,9 +210,11 @@ public:
     int64_t n_vertices() const { return n_; }
 
     template <class Q>
-    void distances(int source, double* d, Workspace& w, Q& queue, double bucket, double probe) const {
-        std::fill(d, d + n_, INF);
-        w.faces.assign(m_, Source{0.0, 0.0, INF, INF});
+    void distances(int64_t original, double* out, Workspace& w, Q& queue, double bucket, double probe) const {
+        const int source = new_of_old_[original];
+        w.d.assign(n_, INF);
+        double* d = w.d.data();
+        w.faces.assign(m_, Source{0.0, 0.0, INF, INF, -1});
         queue.reset(bucket * mean_edge_);
         d[source] = 0.0;
         for (int i = vf_start_[source]; i < vf_start_[source + 1]; ++i) {
@@ -175,7 +225,7 @@ public:
                 d[F_[3 * f + j]] = std::min(d[F_[3 * f + j]], norm(p.x - s.x, p.y - s.y));
             }
             const Point m = centroid(f);
-            w.faces[f] = {s.x, s.y, 0.0, norm(m.x - s.x, m.y - s.y)};
+            w.faces[f] = {s.x, s.y, 0.0, norm(m.x - s.x, m.y - s.y), -1};
             queue.push(w.faces[f].best, f);
         }
         for (double key; true;) {
@@ -185,11 +235,14 @@ public:
             ++w.processed;
             hand_on(f, d, w, queue, probe);
         }
+        for (int64_t i = 0; i < n_; ++i) out[old_of_new_[i]] = d[i];
     }
 
 private:
     int64_t n_, m_;
-    std::vector<int> F_;
+    std::vector<int> F_;                      // in the solver's own numbering
+    std::vector<int> new_of_old_;             // per vertex of the caller: its number here
+    std::vector<int64_t> old_of_new_;
     std::vector<double> frame_;        // per face: corner 1's x, corner 2's x and y (corner 0 at the origin)
     std::vector<Across> across_;       // per half-edge
     std::vector<int> vf_start_, vf_;   // per vertex: its faces' corners 3 f + k (CSR)
@@ -211,7 +264,7 @@ private:
         const Source from = w.faces[f];
         for (int k = 0; k < 3; ++k) {
             const Across& u = across_[3 * f + k];
-            if (u.g < 0) continue;
+            if (u.g < 0 || k == from.entered) continue;
             const double L = u.L, cx = u.cx, cy = u.cy, mx = (L + cx) / 3.0, my = cy / 3.0;
             Point t = u.map({from.x, from.y});
             double sigma = from.sigma;
@@ -253,7 +306,7 @@ private:
             if (at_m < to.best * (1.0 - SETTLED)) {  // into g's frame
                 const Point a = corner(u.g, u.kg), b = corner(u.g, (u.kg + 1) % 3);
                 const double ex = (b.x - a.x) / L, ey = (b.y - a.y) / L;
-                to = {a.x + t.x * ex - t.y * ey, a.y + t.x * ey + t.y * ex, sigma, at_m};
+                to = {a.x + t.x * ex - t.y * ey, a.y + t.x * ey + t.y * ex, sigma, at_m, u.kg};
                 queue.push(at_m, u.g);
             }
         }
@@ -370,9 +423,9 @@ Out solve(const VirtualSources& surface, const Sources& sources, int64_t threads
             Workspace w;
             for (size_t i; (i = next++) < k;) {
                 if (queue_kind == "heap")
-                    surface.distances(static_cast<int>(src[i]), out + i * n, w, w.heap, bucket, probe);
+                    surface.distances(src[i], out + i * n, w, w.heap, bucket, probe);
                 else
-                    surface.distances(static_cast<int>(src[i]), out + i * n, w, w.buckets, bucket, probe);
+                    surface.distances(src[i], out + i * n, w, w.buckets, bucket, probe);
             }
             processed += w.processed;
         };

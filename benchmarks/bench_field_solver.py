@@ -1,0 +1,194 @@
+"""Geodesic fields by virtual source propagation (geodata.approximate_geodesic) against the exact solver
+and the heat method: accuracy and time per field, on one core (issue 55, item 1).
+
+    python benchmarks/bench_field_solver.py [--meshes max homer camel ...] [--levels 0 1] [--sources 8]
+        [--sweep] [--ablation]
+
+Per mesh, a base of ~3-7k vertices and its midpoint subdivisions (``trimesh.remesh.subdivide`` keeps the
+base's vertices and the surface, so the exact distances between base vertices stay the truth at every
+level): mean and max relative error |d - exact| / exact over sources x base vertices (the source left
+out) of the new solver and of the heat method (gegnn.fields.heat.HeatDistance, the landmark fields of
+today's models), and milliseconds a field: the new solver one source a call, the heat method all
+sources in one batched solve (its cheapest use; factorization not counted), the exact solver
+(geodata.geodesic, vtp) one source a call; each the best of --repeat. Ratios are taken within this run.
+
+Meshes: real ones from ../shared/meshes/dev (``max``: decimated-max, ``homer``, ``camel``,
+``cheburashka``, ``scorpion``, ``penguin``), ``irregular``: decimated-max with a third of its faces split
+at a random interior point (uneven valences, thin triangles), ``slivers``: the same with the split point
+near an edge (needle triangles, angles down to ~1 degree).
+
+--sweep: decimated-max at 5k, 20k, 80k, 320k vertices (2 sources; the heat method up to 80k).
+--ablation: the solver's design choices on the real meshes (probe point, queue, bucket width).
+"""
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from geodata._virtual_source_geodesic import VirtualSources
+from geodata.geodesic import geodesic_solver
+from geodata.mesh import Mesh
+from gegnn.fields.heat import HeatDistance
+
+from machine import cpu_description  # benchmarks/ is on sys.path when a script there runs
+
+DEV = Path(__file__).resolve().parents[1] / ".." / "shared" / "meshes" / "dev"
+REAL = {"max": "libigl-tutorial-data/decimated-max.obj", "homer": "common-3d-test-models/homer.obj",
+        "camel": "isoblend/camel.obj", "cheburashka": "common-3d-test-models/cheburashka.obj",
+        "scorpion": "odedstein-meshes/scorpion_low_resolution.obj", "penguin": "odedstein-meshes/penguin.obj"}
+
+
+def load(name: str) -> tuple[np.ndarray, np.ndarray]:
+    import trimesh
+
+    m = trimesh.load(DEV / REAL[name], process=True, force="mesh")  # merge coincident vertices
+    return np.asarray(m.vertices, dtype=np.float64), np.asarray(m.faces, dtype=np.int64)
+
+
+def split_faces(v, f, share: float, near_edge: bool, seed: int = 0):
+    """Split `share` of the faces at a random interior point (barycentric weights), or at a point within
+    2% of the face's first edge (slivers); the surface and its exact distances stay the same."""
+    rng = np.random.default_rng(seed)
+    chosen = rng.random(len(f)) < share
+    w = rng.dirichlet([1, 1, 1], chosen.sum())
+    if near_edge:
+        w[:, 2] = rng.uniform(0.002, 0.02, len(w))
+        w[:, :2] *= ((1 - w[:, 2]) / w[:, :2].sum(1))[:, None]
+    tri = f[chosen]
+    points = np.einsum("fk,fkd->fd", w, v[tri])
+    new = len(v) + np.arange(len(tri))
+    a, b, c = tri.T
+    faces = np.concatenate([f[~chosen], np.stack([a, b, new], 1), np.stack([b, c, new], 1), np.stack([c, a, new], 1)])
+    return np.concatenate([v, points]), faces
+
+
+def base_mesh(name: str):
+    if name in ("irregular", "slivers"):
+        return split_faces(*load("max"), share=1 / 3, near_edge=name == "slivers")
+    return load(name)
+
+
+def subdivide(v, f, levels: int):
+    import trimesh.remesh
+
+    for _ in range(levels):
+        v, f = trimesh.remesh.subdivide(v, f)
+    return np.asarray(v, dtype=np.float64), np.asarray(f, dtype=np.int64)
+
+
+def best_of(fn, repeat: int) -> float:
+    times = []
+    for _ in range(repeat):
+        t = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t)
+    return min(times)
+
+
+def errors(fields: np.ndarray, exact: np.ndarray, sources) -> np.ndarray:
+    """Relative errors (S x base vertices, sources left out) of fields (S, >= base) against exact (S, base)."""
+    n = exact.shape[1]
+    e = np.abs(fields[:, :n] - exact) / np.where(exact > 0, exact, np.nan)
+    e[np.arange(len(sources)), sources] = np.nan
+    return e[np.isfinite(e)]
+
+
+def row(name, level, v, f, sources, exact, repeat, heat=True, exact_time=True) -> str:
+    solver = VirtualSources(v, f)
+    fields = solver.distances(np.asarray(sources, dtype=np.int64))
+    ours = np.mean([best_of(lambda: solver.distances(np.array([s])), repeat) for s in sources[:4]]) * 1e3
+    err = errors(fields, exact, sources)
+    cells = [name, str(level), f"{len(v):,}", f"{100 * err.mean():.3f}%", f"{100 * err.max():.2f}%", f"{ours:.2f}"]
+    if heat:
+        h = HeatDistance(v, f)
+        herr = errors(h.distances(sources).T, exact, sources)
+        ht = best_of(lambda: h.distances(sources), repeat) / len(sources) * 1e3
+        cells += [f"{100 * herr.mean():.2f}%", f"{ht:.2f}", f"{ht / ours:.1f}x"]
+    else:
+        cells += ["", "", ""]
+    if exact_time:
+        solve = geodesic_solver(Mesh(v, f))
+        et = np.mean([best_of(lambda: solve(int(s)), 1) for s in sources[:2]]) * 1e3
+        cells += [f"{et:.1f}", f"{et / ours:.0f}x"]
+    else:
+        cells += ["", ""]
+    return "| " + " | ".join(cells) + " |"
+
+
+HEADER = ("| mesh | level | vertices | mean error | max error | ms/field | heat mean error | heat ms/field "
+          "| heat / ours | exact ms/field | exact / ours |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+
+
+def accuracy_table(names, levels, n_sources, repeat):
+    print(HEADER)
+    for name in names:
+        v0, f0 = base_mesh(name)
+        sources = np.random.default_rng(0).choice(len(v0), n_sources, replace=False)
+        exact = geodesic_solver(Mesh(v0, f0))
+        truth = np.stack([exact(int(s)) for s in sources])
+        for level in levels:
+            v, f = subdivide(v0, f0, level)
+            print(row(name, level, v, f, sources, truth, repeat), flush=True)
+
+
+def sweep(repeat):
+    print("\nsize sweep: decimated-max and its subdivisions, 2 sources (truth: the base's exact distances)")
+    print(HEADER)
+    v0, f0 = load("max")
+    sources = np.random.default_rng(0).choice(len(v0), 2, replace=False)
+    exact = geodesic_solver(Mesh(v0, f0))
+    truth = np.stack([exact(int(s)) for s in sources])
+    for level in range(4):
+        v, f = subdivide(v0, f0, level)
+        print(row("max", level, v, f, sources, truth, repeat if level < 3 else 1, heat=level <= 2,
+                  exact_time=level <= 2), flush=True)
+
+
+def ablation(names, n_sources, repeat):
+    choices = [dict(probe=1.0), dict(probe=0.95), dict(probe=0.9), dict(probe=0.5), dict(probe=0.0),
+               dict(probe=1.0, queue="heap"), dict(probe=1.0, bucket=0.1), dict(probe=1.0, bucket=2.0)]
+    print("\nablation: mean relative error (ms/field) over the real meshes' base level")
+    print("| choice | " + " | ".join(names) + " | mean |\n|---|" + "---:|" * (len(names) + 1))
+    data = []
+    for name in names:
+        v, f = base_mesh(name)
+        sources = np.random.default_rng(0).choice(len(v), n_sources, replace=False)
+        exact = geodesic_solver(Mesh(v, f))
+        data.append((VirtualSources(v, f), sources, np.stack([exact(int(s)) for s in sources])))
+    for choice in choices:
+        cells, means = [], []
+        for solver, sources, truth in data:
+            err = errors(solver.distances(sources.astype(np.int64), **choice), truth, sources).mean()
+            ms = np.mean([best_of(lambda: solver.distances(np.array([s]), **choice), repeat) for s in sources[:2]]) * 1e3
+            cells.append(f"{100 * err:.3f}% ({ms:.2f})")
+            means.append(err)
+        label = ", ".join(f"{k} {v}" for k, v in choice.items())
+        print(f"| {label} | " + " | ".join(cells) + f" | {100 * np.mean(means):.3f}% |", flush=True)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--meshes", nargs="+", default=[*REAL, "irregular", "slivers"])
+    ap.add_argument("--levels", type=int, nargs="+", default=[0, 1])
+    ap.add_argument("--sources", type=int, default=8)
+    ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--sweep", action="store_true")
+    ap.add_argument("--ablation", action="store_true")
+    args = ap.parse_args()
+    torch.set_num_threads(1)  # the heat method's solves run on torch's thread count: one core for all three
+    print(f"CPU: {cpu_description()}")
+    print(f"{args.sources} sources a mesh (seed 0); errors over sources x base vertices; times the best of "
+          f"{args.repeat}, one thread")
+    accuracy_table(args.meshes, args.levels, args.sources, args.repeat)
+    if args.sweep:
+        sweep(args.repeat)
+    if args.ablation:
+        ablation([m for m in args.meshes if m in REAL], args.sources, args.repeat)
+
+
+if __name__ == "__main__":
+    main()
