@@ -6,7 +6,6 @@ import dataclasses
 import logging
 import sys
 from collections import defaultdict
-from functools import partial
 from pathlib import Path
 
 import click
@@ -15,9 +14,8 @@ from tqdm import tqdm
 
 from geodata import store
 from geodata.geodesic import BACKENDS as BACKENDS_GEODESIC
-from geodata.parallel import BACKENDS, in_shard, parallel_map, parse_shard
+from geodata.parallel import BACKENDS, parse_shard
 from geodata.progress import progress_bar
-from geodata.subgroup import pending
 
 log = logging.getLogger("geodata")
 library_log = logging.getLogger("geodata.library")  # libraries' warnings: the log file only, once each
@@ -171,55 +169,24 @@ def prepare(raw_dir, out, pairs, target_vertices, collapse, seed, geodesic_backe
     --strict for 1). Several RAW_DIRs may be prepared into one store (same options): ids come from
     file contents.
     """
-    from geodata.prepare import PrepareConfig, plan_shard, process_task
+    from geodata.points_runner import PointsConfig
+    from geodata.prepare import PrepareConfig
+    from geodata.shard import prepare_shard
 
     _setup_logging(log_file)
     config = PrepareConfig(pairs, target_vertices, collapse, seed, geodesic_backend, timeout,
                            _max_memory(max_memory, jobs, scheduler))
+    points = PointsConfig(n_points, pairs, seed, timeout, config.max_memory) if n_points else None
     try:
-        if not check:
-            store.create_store(out, config.store_params())
-        elif Path(out).exists():  # (no store yet: every input is pending)
-            store.open_store(out)
+        report = prepare_shard(raw_dir, out, config, shard, include, exclude, points, retry_failed, rehash, check,
+                               _runner(jobs, backend, scheduler))
     except store.StoreError as exc:
         raise click.ClickException(str(exc)) from None
-    except OSError as exc:  # a parent that is a file, no permission, a full disk...
-        raise click.ClickException(f"{out}: cannot create the store: {exc.strerror or exc}") from None
-    # A check reads no input file (a recovery checks every shard, again and again) and asks what a run of
-    # these options leaves to do: --rehash and --retry-failed change how a run works, not when it is done.
-    plan = plan_shard(raw_dir, out, shard, include, exclude, rehash and not check, read=not check)
-    pending_now = plan.pending()
-    tasks = plan.pending(retry_failed)
-    where = "" if shard == (0, 1) else f" (shard {shard[0]}/{shard[1]})"
-    notes = [f"{len(plan.unread)} not read yet"] * bool(plan.unread) + \
-        [f"{len(plan.damaged)} damaged: redone by a run"] * bool(plan.damaged)
-    counts = (f"{len(plan.ledger['inputs']) + len(plan.unread)} input files, {len(plan.tasks)} distinct, "
-              f"{len(plan.published)} published, {len(plan.failed - plan.published)} failed, "
-              f"{len(pending_now) + len(plan.unread)} pending" + (f" ({'; '.join(notes)})" if notes else "") + where)
-    shard_meshes = {t.mesh_id for t in plan.tasks}.__contains__  # the points step's: the meshes of this shard
     if check:
-        todo = len(pending_now) + len(plan.unread)
-        if n_points:
-            points_todo, points_done, points_failed = pending(out, "points", shard_meshes) if Path(out).exists() \
-                else ([], 0, 0)
-            counts += f"; points: {points_done} done, {points_failed} failed, {len(points_todo)} pending"
-            todo += len(points_todo)
-        _exit_check(f"prepare {raw_dir} -> {out}: {counts}", todo)
-    store.write_ledger(out, plan.ledger_name, plan.ledger)  # every input accounted for before any work
-    for mesh_id, reason in plan.damaged.items():
-        if store.remove_damaged(out, mesh_id):
-            log.warning("damaged %s (%s): removed, to be prepared again", mesh_id, reason)
-    log.info("prepare %s -> %s: %s; %d to do", raw_dir, out, counts, len(tasks))
-    rows = _run(partial(process_task, out=out, config=config), tasks, "prepare", jobs, backend, scheduler)
-    _summary(rows, len(plan.published), 0 if retry_failed else len(plan.failed - plan.published))
-    if n_points:
-        from geodata.points_runner import PointsConfig, process_points
-        rows += _add_subgroup(out, "points", process_points,
-                              PointsConfig(n_points, pairs, seed, timeout, config.max_memory), retry_failed, False,
-                              jobs, backend, scheduler, shard, log_file, max_memory, keep=shard_meshes)
-    failed = sum(r["status"] != "ok" for r in rows)
+        _exit_check(f"prepare {raw_dir} -> {out}: {report.counts}", report.pending)
+    failed = sum(r["status"] != "ok" for r in report.rows)
     if strict and failed:
-        raise click.ClickException(f"--strict: {failed} of {len(rows)} meshes failed (listed above and in "
+        raise click.ClickException(f"--strict: {failed} of {len(report.rows)} meshes failed (listed above and in "
                                    f"{out}/failed)")
 
 
@@ -232,46 +199,20 @@ def _exit_check(line: str, n_pending: int) -> None:
     sys.exit(CHECK_PENDING if n_pending else 0)
 
 
-def _run(fn, tasks, what, jobs, backend, scheduler) -> list[dict]:
-    rows, warned = [], set()
-    try:
-        for row in progress_bar(parallel_map(fn, tasks, jobs, backend, scheduler), total=len(tasks), desc=what,
-                                unit="mesh", disable=None, dynamic_ncols=True):
-            rows.append(row)
-            for text in row.get("warnings", []):
-                if text not in warned:
-                    warned.add(text)
-                    library_log.info("library warning (first seen on %s): %s", row["source"], text)
-            if row["status"] == "ok":
-                log.info("ok %s %s %.1fs", row["mesh_id"], row["source"], row["seconds"])
-                for note in row.get("notes", []):
-                    log.warning("note %s %s: %s", row["mesh_id"], row["source"], note)
-            else:
-                log.warning("FAILED %s %s [%s] %s", row["mesh_id"], row["source"], row["stage"], row["error"])
-    except RuntimeError as exc:
-        raise click.ClickException(str(exc)) from None
-    return rows
+def _runner(jobs, backend, scheduler):
+    """The shard's runner (:mod:`geodata.shard`): joblib's workers, under a progress bar."""
+    from geodata.shard import local_runner
 
+    run = local_runner(jobs, backend, scheduler)
 
-def _stage_seconds(timings: list[dict]) -> str:
-    """One line of mean / max seconds per stage over meshes' {stage: seconds} dicts."""
-    by_stage = defaultdict(list)
-    for t in timings:
-        for stage, seconds in t.items():
-            by_stage[stage].append(seconds)
-    return "seconds per mesh by stage (mean / max): " + ", ".join(
-        f"{s} {np.mean(v):.2f}/{np.max(v):.2f}" for s, v in by_stage.items())
+    def with_progress(fn, tasks, what):
+        try:
+            yield from progress_bar(run(fn, tasks, what), total=len(tasks), desc=what, unit="mesh", disable=None,
+                                    dynamic_ncols=True)
+        except RuntimeError as exc:  # a backend that cannot start (Dask or Ray missing, no scheduler there)
+            raise click.ClickException(str(exc)) from None
 
-
-def _summary(rows: list[dict], n_done: int, n_failed: int) -> None:
-    ok = [r for r in rows if r["status"] == "ok"]
-    failed = [r for r in rows if r["status"] != "ok"]
-    log.info("summary: %d ok, %d failed this run; %d committed and %d failed before", len(ok), len(failed), n_done,
-             n_failed)
-    if ok:
-        log.info(_stage_seconds([r["timings"] for r in ok]))
-    for r in failed:
-        log.info("  failed %s [%s] %s", r["source"], r["stage"], r["error"])
+    return with_progress
 
 
 @main.command()
@@ -297,27 +238,21 @@ def biharmonic(out, pairs, seed, timeout, retry_failed, check, **scale):
 
 
 def _add_subgroup(out, subgroup, process, config, retry_failed, check, jobs, backend, scheduler, shard,
-                  log_file, max_memory, keep=None) -> list[dict]:
-    """Run ``process`` on this shard's published meshes still without ``subgroup``, with a summary; the
-    rows of this run. The shard's meshes: those whose id ``in_shard``, or those ``keep`` accepts (prepare's
-    points step: the meshes its shard prepared). ``check``: print the counts and exit (:func:`_exit_check`)
-    instead; a failure is then accounted for with or without ``retry_failed`` (it changes the run, not when
-    it is done)."""
+                  log_file, max_memory) -> None:
+    """`geodata biharmonic` and `geodata points`: :func:`geodata.shard.subgroup_shard`, printed; ``check``: the
+    counts, and exit (:func:`_exit_check`)."""
+    from geodata.shard import subgroup_shard
+
     _setup_logging(log_file)
+    config = dataclasses.replace(config, max_memory=_max_memory(max_memory, jobs, scheduler))
     try:
-        store.open_store(out)
+        report = subgroup_shard(out, subgroup, process, config, shard, None, retry_failed, check,
+                                _runner(jobs, backend, scheduler))
     except store.StoreError as exc:
         raise click.ClickException(str(exc)) from None
-    tasks, n_done, n_failed = pending(out, subgroup, keep or partial(in_shard, shard=shard), retry_failed and not check)
-    where = "" if shard == (0, 1) else f" (shard {shard[0]}/{shard[1]})"
     if check:
-        _exit_check(f"{subgroup} {out}: {n_done} done, {n_failed} failed, {len(tasks)} pending{where}", len(tasks))
-    log.info("%s %s: %d to do, %d already done, %d failed before%s", subgroup, out, len(tasks), n_done, n_failed,
-             where)
-    config = dataclasses.replace(config, max_memory=_max_memory(max_memory, jobs, scheduler))
-    rows = _run(partial(process, out=out, config=config), tasks, subgroup, jobs, backend, scheduler)
-    _summary(rows, n_done, n_failed)
-    return rows
+        where = "" if shard == (0, 1) else f" (shard {shard[0]}/{shard[1]})"
+        _exit_check(f"{subgroup} {out}: {report.counts()}{where}", report.pending)
 
 
 @main.command()
@@ -431,6 +366,7 @@ def info(out, csv_file):
     any more (its file was edited or removed) is an orphan, left out of training. `geodata verify` checks
     every file."""
     from geodata.accounting import REMOVE_ORPHANS, fates, orphan_rows, orphans, read_attrs
+    from geodata.shard import stage_seconds
 
     try:
         root = store.open_store(out)
@@ -465,7 +401,7 @@ def info(out, csv_file):
         npairs = np.array([a["n_pairs"] for a in counted])
         click.echo(f"vertices per mesh: min {nv.min()}, mean {nv.mean():.0f}, max {nv.max()}; "
                    f"geodesic pairs: {npairs.sum():,} in all")
-        click.echo(_stage_seconds([a.get("timings", {}) for a in attrs.values()]))
+        click.echo(stage_seconds([a.get("timings", {}) for a in counted]))
     click.echo(f"size on disk: {_du(out) / 2**20:.1f} MiB")
     leftovers = store.temporary_files(out)
     if leftovers:

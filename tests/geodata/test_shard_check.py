@@ -73,3 +73,23 @@ def test_check_of_a_shard_that_never_ran_reads_no_input(tmp_path, monkeypatch):
     assert not contents.intersection(hashed)
     run("prepare", raw, out, *ARGS)
     run("prepare", raw, out, *ARGS, "--check", "--rehash")  # --rehash is a run's: a check says done
+
+
+def test_a_shards_work_is_one_function_a_scheduler_can_call(tmp_path):
+    """geodata.shard.prepare_shard: the check's answer, then the run (ledger, meshes, points) and its rows, with
+    no command line; subgroup_shard likewise for a later stage."""
+    from geodata.points_runner import PointsConfig
+    from geodata.prepare import PrepareConfig
+    from geodata.shard import prepare_shard, subgroup_shard
+
+    raw, out = tmp_path / "raw", tmp_path / "out.zarr"
+    raw.mkdir()
+    (raw / "ball.obj").write_bytes(ball_obj())
+    config, points = PrepareConfig(300, 150), PointsConfig(20, 300)
+    before = prepare_shard(raw, out, config, points=points, check=True)
+    assert before.pending == 1 and "1 pending (1 not read yet)" in before.counts and not out.exists()
+    ran = prepare_shard(raw, out, config, points=points)
+    assert [(r["source"], r["status"]) for r in ran.rows] == [("ball.obj", "ok")] * 2
+    after = prepare_shard(raw, out, config, points=points, check=True)
+    assert after.pending == 0 and after.counts.endswith("points: 1 done, 0 failed, 0 pending")
+    assert subgroup_shard(out, "points", None, points, check=True).counts() == "1 done, 0 failed, 0 pending"
