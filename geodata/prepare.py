@@ -117,9 +117,16 @@ def racy(entry: dict) -> bool:
     return coarse and entry["ctime_ns"] + COARSE_TICK_NS >= entry.get("checked_ns", 0)
 
 
-def reusable_hash(old: dict | None, stat: dict) -> str | None:
-    """An earlier ledger entry's hash where the file is unchanged by every sign its stat gives, else None."""
-    if not old or not old.get("sha256") or any(old.get(k) != stat[k] for k in STAT_KEYS) or racy(old):
+def reusable_hash(old: dict | None, stat: dict, lenient: bool = False) -> str | None:
+    """An earlier ledger entry's hash where the file is unchanged by every sign its stat gives, else None.
+    ``lenient`` (a check's): an entry of a ledger from before ctime and inode were kept (0.3.0) is judged by its
+    size and mtime, so that a recovery's first check after an update does not call every finished shard
+    pending; a run hashes such a file again."""
+    if not old or not old.get("sha256"):
+        return None
+    if lenient and "ctime_ns" not in old:
+        return old["sha256"] if (old.get("size"), old.get("mtime_ns")) == (stat["size"], stat["mtime_ns"]) else None
+    if any(old.get(k) != stat[k] for k in STAT_KEYS) or racy(old):
         return None
     return old["sha256"]
 
@@ -141,7 +148,7 @@ def make_tasks(raw_dir: str | Path, sources: list[str], known: dict | None = Non
         try:
             checked = time.time_ns()
             stat = file_stat(path.stat())
-            digest = reusable_hash((known or {}).get(source), stat)
+            digest = reusable_hash((known or {}).get(source), stat, lenient=unread is not None)
             if digest is None and unread is not None:
                 unread.append(source)
                 continue

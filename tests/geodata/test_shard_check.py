@@ -93,3 +93,23 @@ def test_a_shards_work_is_one_function_a_scheduler_can_call(tmp_path):
     after = prepare_shard(raw, out, config, points=points, check=True)
     assert after.pending == 0 and after.counts.endswith("points: 1 done, 0 failed, 0 pending")
     assert subgroup_shard(out, "points", None, points, check=True).counts() == "1 done, 0 failed, 0 pending"
+
+
+def test_a_check_on_a_ledger_of_0_3_0_judges_by_size_and_mtime(tmp_path):
+    """Ledgers of 0.3.0 keep no ctime or inode: a check still says a finished shard is done (a recovery after the
+    update must not resubmit every shard); a run hashes the files once."""
+    import json
+
+    raw, out = tmp_path / "raw", tmp_path / "out.zarr"
+    raw.mkdir()
+    (raw / "ball.obj").write_bytes(ball_obj())
+    run("prepare", raw, out, *ARGS)
+    (path,) = (out / "sources").glob("*.json")
+    ledger = json.loads(path.read_text())
+    for entry in ledger["inputs"].values():
+        for key in ("ctime_ns", "inode", "checked_ns"):
+            del entry[key]
+    path.write_text(json.dumps(ledger))
+    run("prepare", raw, out, *ARGS, "--check")
+    assert "0 to do" in run("prepare", raw, out, *ARGS).output
+    assert "ctime_ns" in json.loads(path.read_text())["inputs"]["ball.obj"]
