@@ -411,7 +411,8 @@ def info(out, csv_file):
         click.echo(f"orphan: {mesh_id}  {attrs.get(mesh_id, {}).get('source', '?')}  (no input maps to it any more: "
                    f"left out of training; `{REMOVE_ORPHANS.replace('OUT', str(out))}` deletes it)")
     for mesh_id, reason in sorted(damaged.items()):
-        click.echo(f"damaged: {mesh_id}  {reason} (left out of training; a rerun of geodata prepare redoes it)")
+        click.echo(f"damaged: {mesh_id}  {reason} (readers raise DamagedMeshError on it; a rerun of geodata prepare "
+                   f"redoes it)")
     noted = {a.get("source"): a["warnings"] for a in attrs.values() if a.get("warnings")}
     if noted:
         click.echo("ok, with warnings:")

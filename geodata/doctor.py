@@ -28,9 +28,9 @@ class Finding:
 
 
 def _redo(subgroup: str | None) -> str:
-    step = {None: "geodata prepare RAW_DIR OUT (the run that made it)", "biharmonic": "geodata biharmonic OUT",
-            "points": "geodata points OUT"}[subgroup]
-    return f"a rerun of `{step}` replaces it"
+    step = {None: "`geodata prepare RAW_DIR OUT` (the run that made it)", "biharmonic": "`geodata biharmonic OUT`",
+            "points": "`geodata points OUT`"}[subgroup]
+    return f"a rerun of {step} replaces it"
 
 
 def _mesh_files(out) -> tuple[list[tuple[str, str | None]], list[str]]:
@@ -57,9 +57,10 @@ def examine(out, progress=None) -> list[Finding]:
     zips, strays = _mesh_files(out)
     for mesh_id, sub in (progress or (lambda x: x))(zips):
         reason = store.damage(out, mesh_id, sub, thorough=True)
-        if reason:
-            findings.append(Finding("damaged", f"meshes/{store.mesh_file(out, mesh_id, sub).name}", reason,
-                                    f"`geodata verify OUT --remove-damaged` deletes it, then {_redo(sub)}"))
+        if reason:  # a run finds what the quick check finds; damage only the CRCs show must be removed first
+            remedy = _redo(sub) if store.damage(out, mesh_id, sub) else \
+                f"`geodata verify OUT --remove-damaged` deletes it, then {_redo(sub)}"
+            findings.append(Finding("damaged", f"meshes/{store.mesh_file(out, mesh_id, sub).name}", reason, remedy))
     bad = {f.name for f in findings}
     meshes = {m: set() for m, sub in zips if sub is None and f"meshes/{m}.zip" not in bad}
     for mesh_id, sub in zips:
