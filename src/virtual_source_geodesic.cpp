@@ -40,8 +40,9 @@
 // relative 1e-12, so the propagation ends. The order changes the fixed point little.
 //
 // Edges are paired by their two vertices: an edge with one face is a boundary (no face across it), one
-// with three or more is refused. Vertices of other connected parts stay at infinity. Memory: 104 bytes a
-// half-edge (its unfolding), 24 a face and 8 a vertex, and per thread 72 a face and 8 a vertex.
+// with three or more is refused. Vertices of other connected parts stay at infinity. Memory: 64 bytes a
+// half-edge (its unfolding, one cache line), 48 a face and 24 a vertex, and per thread 72 a face and 8
+// a vertex: ~0.5 kB a vertex in all.
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>
 #include <nanobind/stl/string.h>
@@ -159,30 +160,39 @@ inline std::vector<int> morton_order(const double* V, int64_t n, const int64_t* 
 
 // Half-edge h = 3 f + k (face f's edge from corner k to corner k + 1) and the face g across it, seen in
 // the frame of that edge in g: its start A at the origin, its end B at (L, 0), g's third vertex C at
-// (cx, cy), cy >= 0.
-struct Across {
-    double r00, r01, r10, r11, tx, ty;  // f's frame -> the edge's frame in g: (x, y) -> R (x, y) + t
+// (cx, cy), cy >= 0. One cache line.
+struct alignas(64) Across {
+    double ex, ey, tx, ty;  // f's frame -> the edge's frame in g: (s (ex x + ey y) + tx, ey x - ex y + ty)
     double L, cx, cy;
-    int g = -1;                         // -1: a boundary (or degenerate) edge
-    int va, vb, vc;                     // the vertices at A, B and C
-    int kg;                             // the edge in g: from g's corner kg to kg + 1
-    bool reflects;                      // f and g are oriented against each other
-    Point map(Point p) const { return {r00 * p.x + r01 * p.y + tx, r10 * p.x + r11 * p.y + ty}; }
+    int packed = -1;        // g << 3 | (g's corner at A) << 1 | (f and g oriented alike, s = 1); -1: none
+    int vc;                 // the vertex at C
+    int g() const { return packed >> 3; }
+    int kg() const { return (packed >> 1) & 3; }
+    bool reflects() const { return packed & 1; }
+    Point map(Point p) const {
+        const double along = ex * p.x + ey * p.y;
+        return {(reflects() ? along : -along) + tx, ey * p.x - ex * p.y + ty};
+    }
 };
+static_assert(sizeof(Across) == 64, "one cache line");
 
-// What one source needs per face and vertex; one per thread.
 struct Source {
     double x, y, sigma;  // in the face's frame
     double best;         // its distance at the face's centroid
     int entered;         // the edge it came through, which it is not handed back across (-1: none)
-    // saddle vertices the source's rays passed on their left (l) and right (r): a point is seen only
-    // right of the ray to l and left of the ray to r, else the path bends there (NaN: none)
+    int gated;           // whether it has gates (Workspace::gates)
+};
+
+// Saddle vertices a source's rays passed on their left (l) and right (r), in the face's frame: a point
+// is seen only right of the ray to l and left of the ray to r, else the path bends there (NaN: none).
+struct Gates {
     double lx, ly, rx, ry;
 };
 
 struct Workspace {
     std::vector<double> d;  // per vertex, in the solver's numbering
     std::vector<Source> faces;
+    std::vector<Gates> gates;
     Buckets buckets;
     Heap heap;
     int64_t processed = 0;
@@ -228,7 +238,8 @@ public:
         const int source = new_of_old_[original];
         w.d.assign(n_, INF);
         double* d = w.d.data();
-        w.faces.assign(m_, Source{0.0, 0.0, INF, INF, -1, NAN, NAN, NAN, NAN});
+        w.faces.assign(m_, Source{0.0, 0.0, INF, INF, -1, 0});
+        w.gates.resize(m_);
         queue.reset(bucket * mean_edge_);
         d[source] = 0.0;
         for (int i = vf_start_[source]; i < vf_start_[source + 1]; ++i) {
@@ -239,7 +250,7 @@ public:
                 d[F_[3 * f + j]] = std::min(d[F_[3 * f + j]], norm(p.x - s.x, p.y - s.y));
             }
             const Point m = centroid(f);
-            w.faces[f] = {s.x, s.y, 0.0, norm(m.x - s.x, m.y - s.y), -1, NAN, NAN, NAN, NAN};
+            w.faces[f] = {s.x, s.y, 0.0, norm(m.x - s.x, m.y - s.y), -1, 0};
             queue.push(w.faces[f].best, f);
         }
         for (double key; true;) {
@@ -279,26 +290,30 @@ private:
         const Source from = w.faces[f];
         for (int k = 0; k < 3; ++k) {
             const Across& u = across_[3 * f + k];
-            if (u.g < 0 || k == from.entered) continue;
+            if (u.packed < 0 || k == from.entered) continue;
+            const int g = u.g(), va = F_[3 * g + u.kg()], vb = F_[3 * g + (u.kg() + 1) % 3];
             const double L = u.L, cx = u.cx, cy = u.cy, mx = (L + cx) / 3.0, my = cy / 3.0;
             const Point C = {cx, cy};
             Point t = u.map({from.x, from.y});
             double sigma = from.sigma;
             // the gates, left and right of the rays in this frame (a reflection swaps the sides)
             Point gl = {NAN, NAN}, gr = {NAN, NAN};
-            if (!std::isnan(from.lx)) gl = u.map({from.lx, from.ly});
-            if (!std::isnan(from.rx)) gr = u.map({from.rx, from.ry});
-            if (u.reflects) std::swap(gl, gr);
+            if (from.gated) {
+                const Gates& gates = w.gates[f];
+                if (!std::isnan(gates.lx)) gl = u.map({gates.lx, gates.ly});
+                if (!std::isnan(gates.rx)) gr = u.map({gates.rx, gates.ry});
+                if (u.reflects()) std::swap(gl, gr);
+            }
             // where the rays from the source to C and to the probe point meet the edge's line; a source
             // on C's side sees nothing through the edge: bend at the endpoint nearer g's centroid
             double c_x, p_x;
             bool straight = false;
             Point p = C;
             if (t.y > ON_EDGE * L) {
-                const bool at_a = d[u.va] + norm(mx, my) <= d[u.vb] + norm(mx - L, my);
+                const bool at_a = d[va] + norm(mx, my) <= d[vb] + norm(mx - L, my);
                 c_x = p_x = at_a ? -1.0 : 2.0 * L + 1.0;
                 t = {at_a ? 0.0 : L, 0.0};
-                sigma = d[at_a ? u.va : u.vb];
+                sigma = d[at_a ? va : vb];
             } else if (t.y >= -ON_EDGE * L) {
                 c_x = p_x = t.x;
             } else {
@@ -341,25 +356,30 @@ private:
             } else if (!(p_x >= lo && p_x <= hi)) {
                 const bool at_b = p_x > L;
                 t = {at_b ? L : 0.0, 0.0};
-                sigma = d[at_b ? u.vb : u.va];
+                sigma = d[at_b ? vb : va];
                 if (!(sigma < INF)) continue;
                 gl = gr = {NAN, NAN};
                 tie = 1.0 + BENT;
-            } else if (straight && !c_gate && c_x < lo && excess_[u.va] > saddle) {
+            } else if (straight && !c_gate && c_x < lo && excess_[va] > saddle) {
                 gl = {0.0, 0.0};
-            } else if (straight && !c_gate && c_x > hi && excess_[u.vb] > saddle) {
+            } else if (straight && !c_gate && c_x > hi && excess_[vb] > saddle) {
                 gr = {L, 0.0};
             }
             if (!straight && !p_gate) gl = gr = {NAN, NAN};
             const double at_m = (sigma + norm(mx - t.x, my - t.y)) * tie;
-            Source& to = w.faces[u.g];
+            Source& to = w.faces[g];
             if (at_m < to.best * (1.0 - SETTLED)) {  // into g's frame
-                const Point a = corner(u.g, u.kg), b = corner(u.g, (u.kg + 1) % 3);
+                const Point a = corner(g, u.kg()), b = corner(g, (u.kg() + 1) % 3);
                 const double ex = (b.x - a.x) / L, ey = (b.y - a.y) / L;
                 auto face = [&](Point q) { return Point{a.x + q.x * ex - q.y * ey, a.y + q.x * ey + q.y * ex}; };
-                const Point s = face(t), l = face(gl), r = face(gr);
-                to = {s.x, s.y, sigma, at_m, u.kg, l.x, l.y, r.x, r.y};
-                queue.push(at_m, u.g);
+                const Point s = face(t);
+                const bool gated = !std::isnan(gl.x) || !std::isnan(gr.x);
+                to = {s.x, s.y, sigma, at_m, u.kg(), gated};
+                if (gated) {
+                    const Point l = face(gl), r = face(gr);
+                    w.gates[g] = {l.x, l.y, r.x, r.y};
+                }
+                queue.push(at_m, g);
             }
         }
     }
@@ -432,18 +452,18 @@ private:
         u.L = L;
         u.cx = (qc.x - qa.x) * gx + (qc.y - qa.y) * gy;
         u.cy = std::max(0.0, -(qc.x - qa.x) * gy + (qc.y - qa.y) * gx);
-        // f's edge: unit e along pa -> pb, n toward f's third corner (to the left of the edge)
-        const double ex = (pb.x - pa.x) / lp, ey = (pb.y - pa.y) / lp, nx = -ey, ny = ex;
+        // f's edge: unit e along pa -> pb, n = (-ey, ex) toward f's third corner (left of the edge)
+        const double ex = (pb.x - pa.x) / lp, ey = (pb.y - pa.y) / lp;
         // the shared edge's start in f (vertex F[h]) is g's qa (opposite orientations: the usual case)
         // or g's qb (equal orientations); in g's edge frame x runs from qa
         const bool same = F_[h] == F_[o];
         const double sx = same ? 1.0 : -1.0, ox = same ? 0.0 : L;
         // X -> (ox + sx (X - pa).e, -(X - pa).n)
-        u.r00 = sx * ex, u.r01 = sx * ey, u.r10 = -nx, u.r11 = -ny;
-        u.tx = ox - (u.r00 * pa.x + u.r01 * pa.y);
-        u.ty = -(u.r10 * pa.x + u.r11 * pa.y);
-        u.g = g, u.kg = kg, u.reflects = same;
-        u.va = F_[o], u.vb = F_[3 * g + (kg + 1) % 3], u.vc = F_[3 * g + (kg + 2) % 3];
+        u.ex = ex, u.ey = ey;
+        u.tx = ox - sx * (ex * pa.x + ey * pa.y);
+        u.ty = -(ey * pa.x - ex * pa.y);
+        u.packed = g << 3 | kg << 1 | (same ? 1 : 0);
+        u.vc = F_[3 * g + (kg + 2) % 3];
     }
 
     void build_vertex_faces() {
