@@ -14,7 +14,8 @@ or not at all, a published one is never rewritten (one found damaged is removed 
 writer leaves only a temporary file. Many processes may write one store at once: each
 publishes only its own meshes, and the shared folders are made once, before any worker starts
 (concurrent zarr group creation races, zarr-python#1435). Few files per mesh (1 to 3) keep a store of
-50k meshes within the file-count quotas of HPC project spaces. Local (POSIX) filesystems only.
+50k meshes within the file-count quotas of HPC project spaces. Filesystems only (local, NFS, Lustre, GPFS, SMB),
+not object stores.
 """
 from __future__ import annotations
 
