@@ -86,11 +86,12 @@ def fates(ledgers: dict, meshes: dict, attrs: dict, failures: dict, damaged: dic
 REMOVE_ORPHANS = "geodata verify OUT --remove-orphans"
 
 
-def orphans(ledgers: dict, meshes) -> list[str]:
+def orphans(ledgers: dict, meshes, unreadable: dict | None = None) -> list[str]:
     """The published meshes no input maps to any more: an input edited since (its ledger entry now names its new
     mesh) or gone from its folder. None in a store without ledgers (one not written by prepare: nothing to
-    tell)."""
-    if not ledgers:
+    tell), nor while a ledger is ``unreadable`` (:func:`geodata.store.read_ledger_files`: its meshes would look
+    orphaned; `geodata verify` names it)."""
+    if not ledgers or unreadable:
         return []
     mapped = {entry["mesh_id"].casefold() for entry in ledgers.values()}  # one file where names fold (fates)
     return sorted(m for m in meshes if m.casefold() not in mapped)

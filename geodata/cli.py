@@ -378,7 +378,8 @@ def info(out, csv_file):
     attrs = read_attrs(out, meshes, damaged)
     ledgers = store.read_ledgers(out)
     inputs = fates(ledgers, meshes, attrs, failures, damaged)
-    orphaned = orphans(ledgers, meshes)
+    unreadable = store.read_ledger_files(out)[1]
+    orphaned = orphans(ledgers, meshes, unreadable)
     if csv_file == "-":  # the table alone, for a pipe
         _write_csv(csv_file, inputs + orphan_rows(orphaned, attrs))
         return
@@ -407,6 +408,9 @@ def info(out, csv_file):
     if leftovers:
         click.echo(f"temporary files in meshes/: {len(leftovers)} (writers at work, or killed runs' leftovers: "
                    f"safe to delete while no run writes this store)")
+    for name, reason in unreadable.items():
+        click.echo(f"damaged ledger: sources/{name}.json  {reason} (orphans cannot be told until the prepare run "
+                   f"that wrote it runs again: `geodata verify` says more)")
     for mesh_id in orphaned:
         click.echo(f"orphan: {mesh_id}  {attrs.get(mesh_id, {}).get('source', '?')}  (no input maps to it any more: "
                    f"left out of training; `{REMOVE_ORPHANS.replace('OUT', str(out))}` deletes it)")

@@ -79,7 +79,7 @@ def examine(out, progress=None) -> list[Finding]:
     unreadable = sorted(p.name for p in (Path(out) / "failed").iterdir() if p.is_dir() and p.name not in failures)
     findings += [Finding("damaged", f"failed/{name}", "a failure record that cannot be read",
                          "delete the folder: the next run tries the mesh again") for name in unreadable]
-    orphaned = orphans(ledgers, meshes)
+    orphaned = orphans(ledgers, meshes, broken)
     findings += [Finding("orphan", f"meshes/{m}.zip", f"(source {attrs.get(m, {}).get('source', '?')}) no input "
                          f"maps to it any more: its file changed or is gone; left out of training",
                          "`geodata verify OUT --remove-orphans` deletes it") for m in orphaned]

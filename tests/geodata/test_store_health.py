@@ -323,3 +323,20 @@ def test_temporary_names_differ_between_containers_with_one_hostname_and_pid(mon
     monkeypatch.setattr(os, "getpid", lambda: 1)
     names = {store.temporary_name(store.mesh_file("out", "m")) for _ in range(100)}
     assert len(names) == 100 and all(n.name.startswith(".m.zip.node.1.") and n.suffix == ".tmp" for n in names)
+
+
+def test_an_unreadable_ledger_makes_no_orphans_and_is_named(tmp_path):
+    """A ledger that cannot be read would make its meshes look orphaned (and leave them out of training): while
+    one is, there are no orphans, and info and verify name it."""
+    from gegnn.training.data import GeodesicStore
+
+    raw, out = prepared(tmp_path)
+    (ledger,) = (out / "sources").glob("*.json")
+    ledger.write_text(ledger.read_text()[:20])
+    store.write_ledger(out, "other", {"root": "/other", "shard": "0/1", "written": 0.0, "inputs": {}})
+    assert GeodesicStore(out).mesh_ids == list(store.list_meshes(out)) and GeodesicStore(out).orphans == []
+    assert f"damaged ledger: sources/{ledger.name}" in run("info", out).output
+    verify = run("verify", out, code=1).output
+    assert f"damaged: sources/{ledger.name}" in verify and "0 orphan" in verify
+    run("prepare", raw, out, *ARGS)
+    assert "0 damaged, 0 orphan, 0 duplicated, 0 unaccounted" in run("verify", out).output
