@@ -283,10 +283,10 @@ def test_publish_without_hard_links_never_replaces_a_published_file(tmp_path, mo
     """On a filesystem without hard links (SMB, some FUSE mounts: link fails with EPERM) publication is still
     first-writer-wins against writers racing for the name: a no-replace rename (renameat2, renamex_np, Windows'
     rename) or, without one, a name claimed with O_EXCL before the file is moved onto it."""
+    import contextlib
     import errno
     import pathlib
     import threading
-    import time
 
     def no_link(src, dst):
         raise PermissionError(errno.EPERM, "Operation not permitted")
@@ -294,10 +294,17 @@ def test_publish_without_hard_links_never_replaces_a_published_file(tmp_path, mo
     monkeypatch.setattr(os, "link", no_link)
     if not native_rename:
         monkeypatch.setattr(store, "_native_rename_noreplace", lambda: None)
-    real_exists = pathlib.Path.exists
-    monkeypatch.setattr(pathlib.Path, "exists", lambda self, **kw: time.sleep(0.05) or real_exists(self, **kw))
-    final = tmp_path / "m.zip"
     tmps = [tmp_path / f".m.zip.{i}.tmp" for i in range(8)]
+    real_exists, looked = pathlib.Path.exists, threading.Barrier(len(tmps), timeout=2)
+
+    def exists_once_all_looked(self, **kw):  # a check-then-rename lets every writer look before any renames
+        found = real_exists(self, **kw)
+        with contextlib.suppress(threading.BrokenBarrierError):
+            looked.wait()
+        return found
+
+    monkeypatch.setattr(pathlib.Path, "exists", exists_once_all_looked)
+    final = tmp_path / "m.zip"
     for i, tmp in enumerate(tmps):
         tmp.write_bytes(b"writer %d" % i)
     results = [None] * len(tmps)
