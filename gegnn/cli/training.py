@@ -3,12 +3,15 @@ store, adapting it to one mesh and shipping it."""
 from __future__ import annotations
 
 import csv
+import dataclasses
 import math
 from pathlib import Path
 
 import click
 
 from ..config import GeGnnConfig
+from ..model import PRETRAINED
+from ..training.presets import PRESETS, preset
 from .inputs import _click_errors, _load_mesh, _load_model, _model_and_meshes, _output_suffix
 from .options import DEVICE_OPTION, MODEL_ARG, PRETRAINED_HELP, either, old_name
 
@@ -23,6 +26,30 @@ def _workers(ctx, param, value):
     if workers < 0:
         raise click.BadParameter("a number of processes (0 or more), or auto")
     return workers
+
+
+def _init(ctx, param, value):
+    """--init: a checkpoint file, a shipped model's name, or none (from scratch, with --model)."""
+    if value is None or value == "none" or value in PRETRAINED or Path(value).is_file():
+        return None if value == "none" else value
+    raise click.BadParameter(f"{value}: no such file, and no shipped model of that name ({', '.join(PRETRAINED)})")
+
+
+# The model options of `gegnn train` and the GeGnnConfig fields each sets (an explicit one overrides a preset).
+MODEL_OPTIONS = {"channels": ("channels", "embed_dim", "decoder_hidden"), "blocks": ("encoder_blocks", "decoder_blocks"),
+                 "aggr": ("aggr",), "no_edge_length": ("edge_length",), "no_relative_position": ("relative_position",),
+                 "plain_grid_pool": ("sigma_n",), "euclidean_decoder": ("decoder",), "landmarks": ("landmarks",),
+                 "landmark_no_embedding": ("landmark_embedding",), "landmark_no_euclidean": ("landmark_euclidean",),
+                 "landmark_output": ("landmark_output",), "spectral": ("spectral",),
+                 "spectral_no_embedding": ("spectral_embedding",), "neighbors": ("points",), "old_points": ("points",)}
+
+
+def _given(ctx) -> set[str]:
+    """The parameters the user gave (command line or environment), not left at their defaults."""
+    from click.core import ParameterSource
+
+    return {name for name in ctx.params
+            if ctx.get_parameter_source(name) in (ParameterSource.COMMANDLINE, ParameterSource.ENVIRONMENT)}
 
 
 def _blocks(ctx, param, value):
@@ -68,7 +95,14 @@ def _blocks(ctx, param, value):
               help="Cache folder of the landmark fields or spectral codes, filled before the first step and read "
                    "by every loader worker and rank (default RUN/fields; keyed by mesh content, so runs, even "
                    "concurrent ones, may share one). ~1.3 MB per mesh and draw at K = 128, 5k vertices (float16).")
-@click.option("--init", "init_ckpt", type=click.Path(exists=True, dir_okay=False), help="Start from these weights.")
+@click.option("--model", "preset_name", type=click.Choice(PRESETS),
+              help="Train the architecture, fields and schedule of the shipped model of this name (its config and "
+                   "recorded training options; docs/model-card.md), fine-tuned from its weights unless --init says "
+                   "otherwise. Options given explicitly override the preset's.")
+@click.option("--init", "init_ckpt", callback=_init, metavar="CKPT|NAME|none",
+              help="Start from these weights: a checkpoint file, or a shipped model's name "
+                   f"({', '.join(PRETRAINED)}). With --model the default is that model's own weights; none: "
+                   "from scratch.")
 @click.option("--channels", default=256, show_default=True)
 @click.option("--blocks", callback=_blocks, help="ResBlocks per level, encoder = decoder [2,3,3,3,2].")
 @click.option("--aggr", type=click.Choice(["max", "mean", "sum"]), default="max", show_default=True)
@@ -98,16 +132,28 @@ def _blocks(ctx, param, value):
                    "nearest neighbours (--neighbors alone: 8), estimated normals, point-cloud heat-method landmark "
                    "fields (default 0: meshes). With --init, a mesh model's weights start it.")
 @old_name("--points", "--neighbors", "old_points", type=click.IntRange(0), is_flag=False, flag_value=8)
-def train(run_dir, no_rotate, init_ckpt, channels, blocks, aggr, no_edge_length, no_relative_position,
+def train(run_dir, no_rotate, preset_name, init_ckpt, channels, blocks, aggr, no_edge_length, no_relative_position,
           plain_grid_pool, euclidean_decoder, landmarks, landmark_no_embedding, landmark_no_euclidean, spectral,
           spectral_no_embedding, landmark_output, neighbors, old_points, **options):
-    """Train GeGnn on the geodata store STORE."""
+    """Train GeGnn on the geodata store STORE.
+
+    \b
+    Examples:
+      gegnn train data.zarr --run runs/mine --model landmark          # fine-tunes the shipped default
+      gegnn train data.zarr --run runs/mine --model landmark --epochs 4 --lr 5e-5
+      gegnn train data.zarr --run runs/paper --channels 64 --epochs 27  # the paper's network, from scratch
+    """
     points = either(neighbors, old_points, "--neighbors", "--points") or 0
     from ..training.loop import StoreMismatch, TrainConfig
     from ..training.loop import train as run_training
 
+    given = _given(click.get_current_context())
+    if preset_name:
+        chosen = preset(preset_name, "default" if "init_ckpt" not in given else init_ckpt)
+        options.update({k: v for k, v in chosen.schedule.items() if k not in given})
+        init_ckpt = chosen.init
     # The other options are TrainConfig's fields by name (store, epochs, ..., deterministic).
-    cfg = TrainConfig(run=run_dir, rotate=not no_rotate, init=init_ckpt, **options)
+    cfg = TrainConfig(run=run_dir, rotate=not no_rotate, init=init_ckpt, model=preset_name, **options)
     extra = dict(encoder_blocks=blocks, decoder_blocks=blocks) if blocks else {}
     model_cfg = GeGnnConfig(channels=channels, embed_dim=channels, decoder_hidden=channels, aggr=aggr,
                             edge_length=not no_edge_length, relative_position=not no_relative_position,
@@ -116,6 +162,9 @@ def train(run_dir, no_rotate, init_ckpt, channels, blocks, aggr, no_edge_length,
                             landmark_embedding=not landmark_no_embedding,
                             landmark_euclidean=not landmark_no_euclidean, landmark_output=landmark_output,
                             spectral=spectral, spectral_embedding=not spectral_no_embedding, points=points, **extra)
+    if preset_name:  # the preset's architecture where no option asked for another
+        model_cfg = dataclasses.replace(chosen.config, **{f: getattr(model_cfg, f) for option, fields in
+                                                          MODEL_OPTIONS.items() if option in given for f in fields})
     try:
         run_training(cfg, model_cfg)
     except StoreMismatch as exc:  # another dataset on --resume: one line, no traceback
@@ -123,19 +172,23 @@ def train(run_dir, no_rotate, init_ckpt, channels, blocks, aggr, no_edge_length,
 
 
 @click.command("eval")
-@click.argument("checkpoint", type=click.Path(exists=True, dir_okay=False))
+@click.argument("checkpoint", callback=_init, metavar="CHECKPOINT|NAME")
 @click.argument("store", type=click.Path(exists=True, file_okay=False))
 @click.option("--distance", type=click.Choice(["geodesic", "biharmonic"]),
               help="Which stored distances to compare with (default: those the model was trained on).")
 @DEVICE_OPTION
 @click.option("--csv", "csv_path", type=click.Path(dir_okay=False), help="Also write the table as CSV.")
 def evaluate(checkpoint, store, distance, device, csv_path):
-    """Mean relative error of CHECKPOINT on every mesh of STORE (all stored pairs), and overall."""
+    """Mean relative error of CHECKPOINT (a file, or a shipped model's name: landmark, paper, ...) on every mesh
+    of STORE (all stored pairs), and overall."""
     from ..model import GeGnn
     from ..training.devices import pick_device
     from ..training.loop import evaluate_store
+    from ..training.presets import checkpoint_file
 
-    model = GeGnn.from_checkpoint(checkpoint)
+    if checkpoint is None:
+        raise click.BadParameter("a checkpoint file or a shipped model's name", param_hint="CHECKPOINT")
+    model = GeGnn.from_checkpoint(checkpoint_file(checkpoint))
     distance = distance or model.config.distance
     rows = evaluate_store(model, store, distance, device=pick_device(device))
     if not rows:

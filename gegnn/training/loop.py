@@ -7,11 +7,9 @@ own, gloo on CPUs and where ranks share a GPU).
 from __future__ import annotations
 
 import contextlib
-import csv
 import dataclasses
 import hashlib
 import json
-import logging
 import os
 import math
 import time
@@ -20,7 +18,6 @@ from pathlib import Path
 
 import torch
 import torch.distributed as dist
-from tqdm import tqdm
 
 from geodata.progress import progress_bar
 
@@ -33,11 +30,13 @@ from ..metrics import pair_errors, relative_error
 from ..model import GeGnn
 from .data import VAL_EPOCH, BatchDataset, EpochSampler, GeodesicStore, mesh_hash, split_meshes
 from .devices import auto_workers, cpus_per_process, pick_device, set_deterministic
+from .estimate import StepClock, log_header
+from .presets import checkpoint_file
+from .rundir import METRICS, plot_curves, read_metrics, restore_rng, rng_state, run_logger, write_metrics
 from .warmup import warm_decoder
 
 __all__ = ["TrainConfig", "train", "evaluate_store", "lr_at", "store_fingerprint", "StoreMismatch"]
 
-METRICS = ["epoch", "step", "lr", "train_mre", "val_mre", "seconds"]
 # Options a resumed run takes from the command line ("landmark_cache": field_cache's name in older runs; the
 # store: moved, or copied to a node's scratch, it is checked by content, store_fingerprint), --val where given.
 RESUME_KEEPS = ("store", "epochs", "device", "workers", "field_cache", "landmark_cache")
@@ -71,6 +70,7 @@ class TrainConfig:
     decoder_warmup: int = 0          # decoder-only steps on frozen network codes before the first epoch
     field_cache: str | None = None  # cache folder of the landmark fields or spectral codes (None: RUN/fields)
     deterministic: bool = False      # torch's deterministic algorithms: bitwise-exact resume on CUDA too
+    model: str | None = None         # the preset (gegnn.training.presets) the options came from, for the log
 
 
 def lr_at(step: int, total: int, base: float, warmup: int) -> float:
@@ -98,7 +98,7 @@ def train_step(model, batch, optimizer, lr: float, clip_grad: float, device) -> 
 
 
 def train_epoch(model, loader, optimizer, cfg: TrainConfig, step: int, total: int, warmup: int,
-                device, ctx: Dist) -> tuple[float, int]:
+                device, ctx: Dist, clock: StepClock | None = None) -> tuple[float, int]:
     model.train()
     losses = []
     bar = progress_bar(loader, desc="train", leave=False, disable=not ctx.main, dynamic_ncols=True)
@@ -106,6 +106,8 @@ def train_epoch(model, loader, optimizer, cfg: TrainConfig, step: int, total: in
         losses.append(train_step(model, batch.to(device), optimizer, lr_at(step, total, cfg.lr, warmup),
                                  cfg.clip_grad, device))
         step += 1
+        if clock is not None:
+            clock.step_done()
         if len(losses) % PROGRESS_EVERY == 1:
             show_loss(bar, losses)
     total_loss = torch.stack(losses).double().sum().item() if losses else 0.0
@@ -126,80 +128,6 @@ def validate(model, loader, device, ctx: Dist) -> float:
         count += e.numel()
     err, count = all_sum([err.item(), count], ctx, device)
     return err / count if count else float("nan")
-
-
-# -- run directory ---------------------------------------------------------------------------------
-def run_logger(run: Path, main: bool) -> logging.Logger:
-    log = logging.getLogger(f"gegnn.train.{run.resolve()}")
-    log.setLevel(logging.INFO if main else logging.WARNING)
-    log.propagate = False
-    for h in list(log.handlers):
-        log.removeHandler(h)
-        h.close()
-    if main:
-        fmt = logging.Formatter("%(asctime)s %(message)s", "%Y-%m-%d %H:%M:%S")
-        for h in (logging.FileHandler(run / "train.log"), TqdmHandler()):
-            h.setFormatter(fmt)
-            log.addHandler(h)
-    return log
-
-
-class TqdmHandler(logging.Handler):
-    """Console lines that do not tear the progress bar."""
-
-    def emit(self, record):
-        tqdm.write(self.format(record))
-
-
-def read_metrics(run: Path, before_epoch: int) -> list[dict]:
-    path = run / "metrics.csv"
-    if not path.exists():
-        return []
-    with open(path, newline="") as f:
-        return [r for r in csv.DictReader(f) if int(r["epoch"]) < before_epoch]
-
-
-def write_metrics(run: Path, rows: list[dict]) -> None:
-    with open(run / "metrics.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, METRICS)
-        w.writeheader()
-        w.writerows(rows)
-
-
-def plot_curves(run: Path, rows: list[dict]) -> None:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(6, 4))
-    epochs = [int(r["epoch"]) for r in rows]
-    for key in ("train_mre", "val_mre"):
-        ax.plot(epochs, [float(r[key]) for r in rows], marker=".", label=key)
-    ax.set(xlabel="epoch", ylabel="mean relative error", yscale="log")
-    ax.legend()
-    fig.tight_layout()
-    fig.savefig(run / "curves.png", dpi=100)
-    plt.close(fig)
-
-
-def rng_state() -> dict:
-    """The CPU generator's state and, where this process has used CUDA, its own device's (each rank
-    drives one GPU; a resume may see another number of them)."""
-    state = {"torch": torch.get_rng_state()}
-    if torch.cuda.is_available() and torch.cuda.is_initialized():
-        state["cuda"] = torch.cuda.get_rng_state()
-    return state
-
-
-def restore_rng(state: dict) -> None:
-    """Undo :func:`rng_state` on this process's current CUDA device. Checkpoints written before kept
-    every device's state as ``cuda0``, ``cuda1``, ...: the current device's is taken, if saved."""
-    if "torch" in state:
-        torch.set_rng_state(state["torch"])
-    if torch.cuda.is_available():
-        cuda = state.get("cuda", state.get(f"cuda{torch.cuda.current_device()}"))
-        if cuda is not None:
-            torch.cuda.set_rng_state(cuda)
 
 
 # -- the run -------------------------------------------------------------------------------------
@@ -239,6 +167,7 @@ def _train(cfg: TrainConfig, model_config, resume, run: Path, device, ctx: Dist,
     stores = {"store": store_fingerprint(store), "val_store": val_store and store_fingerprint(val_store)}
     if resume is not None:
         check_stores(resume.metadata.get("stores"), stores, run, cfg, log)
+    log_header(log, cfg, model, device)  # the first line of a run that starts
     if ctx.main:  # the run's record of them (whole or not at all), to say what differs on a resume
         record = {k: v and {"path": getattr(cfg, k), **v} for k, v in stores.items()}
         (run / ".stores.tmp").write_text(json.dumps(record))
@@ -282,16 +211,20 @@ def _train(cfg: TrainConfig, model_config, resume, run: Path, device, ctx: Dist,
 
     rows = read_metrics(run, start_epoch) if ctx.main else []
     last_plot = -math.inf
+    clock = StepClock(log, cfg, model.config, device, steps_per_epoch, cfg.epochs - start_epoch)
     for epoch in range(start_epoch, cfg.epochs):
         t0 = time.perf_counter()
         sampler.set_epoch(epoch)
-        train_mre, step = train_epoch(net, loader, optimizer, cfg, step, total, warmup, device, ctx)
+        if epoch == start_epoch:
+            clock.start()
+        train_mre, step = train_epoch(net, loader, optimizer, cfg, step, total, warmup, device, ctx, clock)
         val_mre = validate(model, val_loader, device, ctx)
         row = dict(epoch=str(epoch), step=str(step), lr=f"{lr_at(step - 1, total, cfg.lr, warmup):.3e}",
                    train_mre=f"{train_mre:.6f}", val_mre=f"{val_mre:.6f}",
                    seconds=f"{time.perf_counter() - t0:.2f}")
         log.info(f"epoch {epoch} step {step} lr {float(row['lr']):.2e} train_mre {train_mre:.4f} "
                  f"val_mre {val_mre:.4f} {float(row['seconds']):.1f}s")
+        clock.epoch_done(float(row["seconds"]))  # the first epoch's only
         score = val_mre if math.isfinite(val_mre) else train_mre
         improved = score < best
         best = min(best, score)
@@ -316,7 +249,7 @@ def build_model(cfg: TrainConfig, model_config, resume, device, log=None):
     if resume is not None:
         model_config = resume.config
     elif cfg.init:
-        init = load_checkpoint(cfg.init)
+        init = load_checkpoint(checkpoint_file(cfg.init))
         own_decoder = model_config is not None and (model_config.landmarks or model_config.spectral
                                                     or model_config.decoder != "mlp")
         # The kind of decoder from the command line; its width, like the network, from the checkpoint.
