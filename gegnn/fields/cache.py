@@ -14,7 +14,8 @@ of NumPy files, one a (fields, mesh, draw), read back per sample (a few millisec
     CACHE/format.json                          {"gegnn_field_cache": 2}
     CACHE/<spec>/<key[:2]>/<key>-<seed>.npy    float16 (N, K) landmark fields, float32 (N, m + 1) codes
 
-``<spec>`` (:attr:`FieldSpec.name`) is ``k<K>-rounds16`` for a mesh's landmark fields, ``k<K>-cloud<k>-surface2``
+``<spec>`` (:attr:`FieldSpec.name`) is ``k<K>-rounds16`` for a mesh's heat-method landmark fields (``k<K>-rounds16-vsp``
+by virtual source propagation), ``k<K>-cloud<k>-surface2``
 for a point cloud's and ``spectral<m>`` for spectral codes. ``key`` is a hash of
 the mesh's vertices and faces, not its id: an id names the raw file, and two stores made from one file
 with other settings hold other meshes. So one cache can serve several runs and stores
@@ -57,20 +58,22 @@ LANDMARK_DRAWS = 4  # landmark choices per training mesh (augmentation; each com
 
 @dataclass(frozen=True)
 class FieldSpec:
-    """Which fields: ``"landmark"`` (K heat-method landmark distance fields per component) or
-    ``"spectral"`` (m spectral modes and the tail scale), and K or m; ``cloud``: the k of a point-cloud
-    model's neighbour graph, whose landmark fields come from the points alone (:mod:`gegnn.fields.pointcloud`),
-    0 for a mesh model."""
+    """Which fields: ``"landmark"`` (K landmark distance fields per component) or ``"spectral"`` (m spectral
+    modes and the tail scale), and K or m; ``cloud``: the k of a point-cloud model's neighbour graph, whose
+    landmark fields come from the points alone (:mod:`gegnn.fields.pointcloud`), 0 for a mesh model;
+    ``solver``: a mesh's landmark fields by the heat method (``"heat"``) or by virtual source propagation
+    (``"vsp"``, :func:`gegnn.fields.landmarks.landmark_solver`)."""
 
     kind: str
     size: int
     cloud: int = 0
+    solver: str = "heat"
 
     @classmethod
     def of(cls, config) -> "FieldSpec | None":
         """The fields a :class:`gegnn.GeGnnConfig` asks for (None for the paper's model)."""
         if config.landmarks:
-            return cls("landmark", config.landmarks, config.points)
+            return cls("landmark", config.landmarks, config.points, "heat" if config.points else config.landmark_fields)
         return cls("spectral", config.spectral) if config.spectral else None
 
     @property
@@ -98,7 +101,8 @@ class FieldSpec:
         # 2026-11-26, gegnn.fields.landmarks.FPS_BATCH): not those of older caches
         if self.cloud:
             return f"k{self.size}-cloud{self.cloud}-surface2"
-        return f"k{self.size}" + (f"-rounds{FPS_BATCH}" if FPS_BATCH > 1 else "")
+        # "-vsp": fields by virtual source propagation (since 2026-11-27); the heat method's name is unchanged
+        return f"k{self.size}" + (f"-rounds{FPS_BATCH}" if FPS_BATCH > 1 else "") + ("-vsp" if self.solver == "vsp" else "")
 
     def compute(self, vertices: np.ndarray, faces: np.ndarray, seed: int = 0) -> np.ndarray:
         """The fields of one mesh, float32 (N, K) or (N, m + 1); for a point-cloud model, of its vertices as
@@ -114,7 +118,7 @@ class FieldSpec:
             solver = cloud_landmark_solver(vertices, part)
             return [solver(self.size, seed).distances for seed in seeds]
         if self.kind == "landmark":
-            solver = landmark_solver(vertices, faces, self.size)
+            solver = landmark_solver(vertices, faces, self.size, fields=self.solver)
             return [solver(seed).distances for seed in seeds]
         codes = spectral_codes(vertices, faces, self.size)  # no choice: the same for every seed
         return [codes for _ in seeds]

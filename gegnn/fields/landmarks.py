@@ -77,15 +77,16 @@ class LandmarkFields:
         return self.distances.shape[1]
 
 
-def landmark_fields(vertices, faces, k: int, seed: int = 0, t_coef: float = T_COEF, batch: int | None = None
-                    ) -> LandmarkFields:
-    """K geodesic farthest-point landmarks per component and their heat-method distance fields.
+def landmark_fields(vertices, faces, k: int, seed: int = 0, t_coef: float = T_COEF, batch: int | None = None,
+                    fields: str = "heat") -> LandmarkFields:
+    """K geodesic farthest-point landmarks per component and their distance fields (heat method, or
+    virtual source propagation: ``fields="vsp"``).
 
     Deterministic for a given mesh, ``k`` and ``seed`` (the seed picks each component's first
     landmark). Components of fewer than 3 vertices or without faces (unused vertices) get distance 0
     to themselves. Non-finite solver output (possible on badly broken meshes) is replaced by the
     field's largest finite value, so the result is always finite and non-negative. The same as
-    ``landmark_solver(vertices, faces, k, t_coef)(seed)``.
+    ``landmark_solver(vertices, faces, k, t_coef, batch, fields)(seed)``.
 
     Args:
         vertices: (N, 3) float.
@@ -95,14 +96,19 @@ def landmark_fields(vertices, faces, k: int, seed: int = 0, t_coef: float = T_CO
         t_coef: heat-method time step (potpourri3d ``t_coef``).
         batch: landmarks chosen a round (:func:`batched_farthest_point_fields`; 1: sequential sampling;
             default FPS_BATCH).
+        fields: ``"heat"`` (the shipped models' up to v2) or ``"vsp"`` (~0.15% from exact, ~1.5 ms a field
+            at 5k vertices: :mod:`geodata.approximate_geodesic`).
     """
-    return landmark_solver(vertices, faces, k, t_coef, batch)(seed)
+    return landmark_solver(vertices, faces, k, t_coef, batch, fields)(seed)
 
 
-def landmark_solver(vertices, faces, k: int, t_coef: float = T_COEF, batch: int | None = None
-                    ) -> Callable[[int], LandmarkFields]:
-    """``seed -> LandmarkFields``: :func:`landmark_fields` of one mesh for any seed, each component's heat
-    method set up once (on the first call) and sampled for every seed."""
+def landmark_solver(vertices, faces, k: int, t_coef: float = T_COEF, batch: int | None = None,
+                    fields: str = "heat") -> Callable[[int], LandmarkFields]:
+    """``seed -> LandmarkFields``: :func:`landmark_fields` of one mesh for any seed, each component's solver
+    set up once (on the first call) and sampled for every seed. ``fields``: ``"heat"`` (the heat method) or
+    ``"vsp"`` (virtual source propagation, :func:`_vsp_field`)."""
+    if fields not in ("heat", "vsp"):
+        raise ValueError(f"fields must be 'heat' or 'vsp', got {fields!r}")
     if k < 1:
         raise ValueError(f"k must be >= 1, got {k}")
     mesh = Mesh(vertices, faces)
@@ -120,7 +126,7 @@ def landmark_solver(vertices, faces, k: int, t_coef: float = T_COEF, batch: int 
         parts.append((idx, local[mesh.faces[face_groups[c]]]))
     solvers = {}
 
-    def fields(seed: int = 0) -> LandmarkFields:
+    def draw(seed: int = 0) -> LandmarkFields:
         out = np.zeros((mesh.n_vertices, k), dtype=np.float32)
         landmarks = np.zeros((n_comp, k), dtype=np.int64)
         for c, (idx, sub_faces) in enumerate(parts):
@@ -130,14 +136,32 @@ def landmark_solver(vertices, faces, k: int, t_coef: float = T_COEF, batch: int 
                 continue
             n_fields = min(k, len(idx))
             if c not in solvers:
-                solvers[c] = _heat_field(mesh.vertices[idx], sub_faces, t_coef, n_fields)
+                solvers[c] = (_vsp_field(mesh.vertices[idx], sub_faces, t_coef, n_fields) if fields == "vsp"
+                              else _heat_field(mesh.vertices[idx], sub_faces, t_coef, n_fields))
             chosen, sampled = batched_farthest_point_fields(solvers[c], mesh.vertices[idx], n_fields,
                                                             int(rng.integers(len(idx))), batch or FPS_BATCH)
             cols = np.arange(k) % len(chosen)  # fewer vertices than K: repeat
             out[idx] = sampled[:, cols]
             landmarks[c] = idx[np.asarray(chosen)[cols]]
         return LandmarkFields(out, landmarks, labels)
-    return fields
+    return draw
+
+
+def _vsp_field(vertices, faces, t_coef: float, fields: int):
+    """``fields(sources) -> (N, len(sources))`` by virtual source propagation
+    (:class:`geodata.approximate_geodesic.ApproximateGeodesicSolver`, ~0.15% from exact, one thread: the
+    embedding's network runs beside it); a part it refuses (an edge of three or more faces) gets the heat
+    method's fields, with a warning naming the reason."""
+    from geodata.approximate_geodesic import ApproximateGeodesicSolver
+
+    try:
+        solver = ApproximateGeodesicSolver(vertices, faces)
+    except ValueError as exc:
+        import warnings
+
+        warnings.warn(f"landmark fields by the heat method on a part of {len(vertices)} vertices: {exc}", stacklevel=2)
+        return _heat_field(vertices, faces, t_coef, fields)
+    return lambda sources: solver.distances(np.asarray(sources, dtype=np.int64), threads=1).T
 
 
 def _heat_field(vertices, faces, t_coef: float, fields: int):

@@ -41,6 +41,13 @@ def test_specs_name_their_fields_and_read_a_models_config():
     assert (mesh.name, cloud.name, codes.name) == ("k64-rounds16", "k64-cloud8-surface2", "spectral32")
     assert (mesh.columns, codes.columns) == (64, 33)  # the spectral codes and their tail scale
     assert (mesh.draws, cloud.draws, codes.draws) == (LANDMARK_DRAWS, LANDMARK_DRAWS, 1) and LANDMARK_DRAWS > 1
+    # fields by virtual source propagation: their own folder, so heat and vsp fields never mix; a cloud's are
+    # its own whatever the config says
+    assert FieldSpec.of(small_config(landmarks=64, landmark_fields="vsp")) == FieldSpec("landmark", 64, 0, "vsp")
+    assert FieldSpec("landmark", 64, 0, "vsp").name == "k64-rounds16-vsp"
+    assert FieldSpec.of(small_config(landmarks=64, points=8, landmark_fields="vsp")).name == cloud.name
+    with pytest.raises(ValueError, match="landmark_fields must be one of heat, vsp"):
+        small_config(landmarks=64, landmark_fields="exact")
 
 
 def test_a_spec_computes_the_fields_it_names():
@@ -48,6 +55,8 @@ def test_a_spec_computes_the_fields_it_names():
     np.testing.assert_array_equal(FieldSpec("landmark", 12).compute(v, f, seed=3),
                                   landmark_fields(v, f, 12, seed=3).distances)
     np.testing.assert_array_equal(FieldSpec("spectral", 8).compute(v, f, seed=3), spectral_codes(v, f, 8))
+    np.testing.assert_array_equal(FieldSpec("landmark", 12, 0, "vsp").compute(v, f, seed=3),
+                                  landmark_fields(v, f, 12, seed=3, fields="vsp").distances)
     # a query's fields (no seed given) are draw 0, the draw that validation measures
     np.testing.assert_array_equal(FieldSpec("landmark", 12).compute(v, f), landmark_fields(v, f, 12, seed=0).distances)
 

@@ -74,6 +74,39 @@ def test_bounds_hold_with_exact_fields(mesh):
     assert (lower < d).float().mean() > 0.5  # the bound is not trivially tight: there is work left
 
 
+def test_virtual_source_fields_are_near_exact_where_the_heat_methods_are_not():
+    """On a sphere (2,562 vertices) the fields by virtual source propagation are 0.09% (mean relative) from
+    the great circles of the same landmarks, the heat method's 1.4%; the landmark lower bound from 32 of them
+    0.87% short of the distance, the heat method's 1.89%; each field is 0 at its landmark."""
+    v, f = sphere(4)
+    u = v / np.linalg.norm(v, axis=1, keepdims=True)
+    errors, bounds = {}, {}
+    i, j = np.random.default_rng(0).integers(0, len(v), (2, 5000))
+    keep = i != j
+    great = np.arccos(np.clip((u[i] * u[j]).sum(1), -1, 1))[keep]
+    for kind in ("heat", "vsp"):
+        lf = landmark_fields(v, f, 32, fields=kind)
+        exact = np.arccos(np.clip(u @ u[lf.landmarks[0]].T, -1, 1))
+        assert np.abs(lf.distances[lf.landmarks[0], np.arange(32)]).max() < 1e-6
+        far = exact > 0.05
+        errors[kind] = np.mean(np.abs(lf.distances - exact)[far] / exact[far])
+        lower = np.abs(lf.distances[i] - lf.distances[j]).max(1)[keep]
+        bounds[kind] = np.mean((great - lower) / great)
+    assert errors["vsp"] < 0.002 and errors["heat"] > 0.01
+    assert bounds["vsp"] < 0.012 and bounds["heat"] > 1.5 * bounds["vsp"]
+
+
+def test_a_part_virtual_source_propagation_refuses_gets_the_heat_methods_fields_with_a_warning():
+    """An edge of three faces (a fin on a sphere): the heat method's fields for that part, said in a warning."""
+    v, f = sphere(2)
+    a, b = f[0, 0], f[0, 1]
+    v = np.vstack([v, 2 * v[a]])
+    f = np.vstack([f, [[a, b, len(v) - 1]]])
+    with pytest.warns(UserWarning, match="heat method .* non-manifold"):
+        got = landmark_fields(v, f, 8, fields="vsp")
+    np.testing.assert_array_equal(got.distances, landmark_fields(v, f, 8).distances)
+
+
 @pytest.mark.parametrize("output", ["ratio", "interval"])
 def test_decoder_invariant_to_landmark_order_symmetric_zero_on_diagonal(output):
     k = 12
