@@ -3,6 +3,7 @@ and the heat method: accuracy and time per field, on one core (issue 55, item 1)
 
     python benchmarks/bench_field_solver.py [--meshes max homer camel ...] [--levels 0 1] [--sources 8]
         [--sweep] [--ablation]
+    python benchmarks/bench_field_solver.py --lower-bound [MESH ...]
 
 Per mesh, a base of ~3-7k vertices and its midpoint subdivisions (``trimesh.remesh.subdivide`` keeps the
 base's vertices and the surface, so the exact distances between base vertices stay the truth at every
@@ -21,7 +22,11 @@ at a random interior point (uneven valences, thin triangles), ``slivers``: the s
 near an edge (needle triangles, angles down to ~1 degree).
 
 --sweep: decimated-max at 5k, 20k, 80k, 320k vertices (2 sources; the heat method up to 80k).
---ablation: the solver's design choices on the real meshes (probe point, queue, bucket width).
+--ablation: the solver's design choices on the real meshes (probe point, saddle gates, queue, bucket width).
+--lower-bound: issue 55's table: the triangle-inequality lower bound LB(i, j) = max_k |d(i, l_k) - d(j, l_k)|
+over the first K of 256 farthest-point landmarks (chosen on the heat method's fields in rounds of 16, as
+today's models do; "own landmarks": chosen on the new fields), against exact distances from 20 sources to
+every vertex, with each kind of field at the same landmarks.
 """
 from __future__ import annotations
 
@@ -181,6 +186,41 @@ def ablation(names, n_sources, repeat):
         print(f"| {label} | " + " | ".join(cells) + f" | {100 * np.mean(means):.3f}% |", flush=True)
 
 
+def lower_bound_errors(fields: np.ndarray, truth: np.ndarray, sources, ks) -> list[float]:
+    """Mean relative error of LB over sources x vertices (the source left out), for the first K columns
+    of ``fields`` (N, 256), each K of ``ks``."""
+    out = []
+    for k in ks:
+        lb = np.stack([np.abs(fields[s, :k] - fields[:, :k]).max(axis=1) for s in sources])
+        out.append(errors(lb, truth, sources).mean())
+    return out
+
+
+def lower_bound_table(names, ks=(16, 32, 64, 128, 256), n_sources=20):
+    from gegnn.fields.landmarks import batched_farthest_point_fields
+
+    print(f"\nlower bound of the first K of 256 landmarks: mean relative error over {n_sources} sources x "
+          "every vertex")
+    print("| mesh | fields | " + " | ".join(f"K = {k}" for k in ks) + " |\n|---|---|" + "---:|" * len(ks))
+    for name in names:
+        v, f = base_mesh(name)
+        exact = geodesic_solver(Mesh(v, f))
+        rng = np.random.default_rng(0)
+        sources = rng.choice(len(v), n_sources, replace=False)
+        truth = np.stack([exact(int(s)) for s in sources])
+        heat, ours = HeatDistance(v, f), VirtualSources(v, f)
+        first = int(rng.integers(len(v)))
+        landmarks, by_heat = batched_farthest_point_fields(heat.distances, v, max(ks), first)
+        picks = np.asarray(landmarks, dtype=np.int64)
+        rows = {"heat method (today)": by_heat, "virtual sources": ours.distances(picks).T,
+                "exact": np.stack([exact(int(l)) for l in picks], axis=1)}
+        _, rows["virtual sources, own landmarks"] = batched_farthest_point_fields(
+            lambda s: ours.distances(np.asarray(s, dtype=np.int64)).T, v, max(ks), first)
+        for label, fields in rows.items():
+            cells = lower_bound_errors(np.asarray(fields, dtype=np.float64), truth, sources, ks)
+            print(f"| {name} | {label} | " + " | ".join(f"{100 * e:.2f}%" for e in cells) + " |", flush=True)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--meshes", nargs="+", default=[*REAL, "irregular", "slivers"])
@@ -189,9 +229,14 @@ def main():
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--sweep", action="store_true")
     ap.add_argument("--ablation", action="store_true")
+    ap.add_argument("--lower-bound", nargs="*", metavar="MESH", help="issue 55's LB table on these meshes "
+                    "(default: max homer camel)")
     args = ap.parse_args()
     torch.set_num_threads(1)  # the heat method's solves run on torch's thread count: one core for all three
     print(f"CPU: {cpu_description()}")
+    if args.lower_bound is not None:
+        lower_bound_table(args.lower_bound or ["max", "homer", "camel"])
+        return
     print(f"{args.sources} sources a mesh (seed 0); errors over sources x base vertices; times: the least CPU "
           f"time of {args.repeat} calls, one thread")
     accuracy_table(args.meshes, args.levels, args.sources, args.repeat)
