@@ -376,9 +376,9 @@ def info(out, csv_file):
     failures = store.list_failures(out)
     damaged: dict[str, str] = {}
     attrs = read_attrs(out, meshes, damaged)
-    ledgers = store.read_ledgers(out)
+    unreadable: dict[str, str] = {}
+    ledgers = store.read_ledgers(out, unreadable)
     inputs = fates(ledgers, meshes, attrs, failures, damaged)
-    unreadable = store.read_ledger_files(out)[1]
     orphaned = orphans(ledgers, meshes, unreadable)
     if csv_file == "-":  # the table alone, for a pipe
         _write_csv(csv_file, inputs + orphan_rows(orphaned, attrs))

@@ -69,11 +69,11 @@ def examine(out, progress=None) -> list[Finding]:
                                     f"its mesh {mesh_id} is not published", "delete it while no run writes the store"))
     findings += [Finding("unaccounted", f"meshes/{name}", "not a file of the store",
                          "move it elsewhere (a store's meshes/ holds zips alone)") for name in strays]
-    _, broken = store.read_ledger_files(out)
+    broken: dict[str, str] = {}
+    ledgers = store.read_ledgers(out, broken)
     findings += [Finding("damaged", f"sources/{name}.json", reason,
                          "rerun the prepare run (shard) that wrote it: it writes its ledger again")
                  for name, reason in broken.items()]
-    ledgers = store.read_ledgers(out)
     attrs = read_attrs(out, meshes)
     failures = store.list_failures(out)
     unreadable = sorted(p.name for p in (Path(out) / "failed").iterdir() if p.is_dir() and p.name not in failures)

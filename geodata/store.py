@@ -383,11 +383,14 @@ def read_ledger_files(out: str | Path) -> tuple[dict[str, dict], dict[str, str]]
     return ledgers, damaged
 
 
-def read_ledgers(out: str | Path) -> dict[tuple[str, str], dict]:
+def read_ledgers(out: str | Path, unreadable: dict | None = None) -> dict[tuple[str, str], dict]:
     """Every input file any prepare run found: (input root, source) -> {sha256, mesh_id, size, mtime_ns, ...},
     the newest ledger's entry where several runs saw one file. An upgraded store's sources (the ledger of
-    `geodata upgrade`) count until a prepare run finds a file of that name: that run's entry replaces it."""
-    ledgers, _ = read_ledger_files(out)
+    `geodata upgrade`) count until a prepare run finds a file of that name: that run's entry replaces it. The
+    ledgers that cannot be read go to ``unreadable`` (name -> why)."""
+    ledgers, damaged = read_ledger_files(out)
+    if unreadable is not None:
+        unreadable.update(damaged)
     upgraded = ledgers.pop(UPGRADE_LEDGER, None)
     inputs = {}
     for ledger in sorted(ledgers.values(), key=lambda led: led["written"]):

@@ -72,7 +72,9 @@ class GeodesicStore:
         """Published meshes no input maps to any more (left out of ``mesh_ids`` unless ``include_orphans``)."""
         from geodata.accounting import orphans
 
-        return orphans(geostore.read_ledgers(self.path), self._published, geostore.read_ledger_files(self.path)[1])
+        unreadable: dict = {}
+        ledgers = geostore.read_ledgers(self.path, unreadable)
+        return orphans(ledgers, self._published, unreadable)
 
     @cached_property
     def mesh_ids(self) -> list[str]:
