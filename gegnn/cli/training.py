@@ -39,8 +39,9 @@ def _init(ctx, param, value):
 MODEL_OPTIONS = {"channels": ("channels", "embed_dim", "decoder_hidden"), "blocks": ("encoder_blocks", "decoder_blocks"),
                  "aggr": ("aggr",), "no_edge_length": ("edge_length",), "no_relative_position": ("relative_position",),
                  "plain_grid_pool": ("sigma_n",), "euclidean_decoder": ("decoder",), "landmarks": ("landmarks",),
-                 "landmark_no_embedding": ("landmark_embedding",), "landmark_no_euclidean": ("landmark_euclidean",),
-                 "landmark_output": ("landmark_output",), "spectral": ("spectral",),
+                 "landmark_fields": ("landmark_fields",), "landmark_no_embedding": ("landmark_embedding",),
+                 "landmark_no_euclidean": ("landmark_euclidean",), "landmark_output": ("landmark_output",),
+                 "spectral": ("spectral",),
                  "spectral_no_embedding": ("spectral_embedding",), "neighbors": ("points",), "old_points": ("points",)}
 
 
@@ -115,6 +116,10 @@ def _blocks(ctx, param, value):
                    "bound the decoder (0: the paper's model). With --init from a paper model, its network "
                    "is kept and the landmark decoder starts fresh; from a landmark model with another K, "
                    "its decoder is kept too (its weights do not depend on K).")
+@click.option("--landmark-fields", type=click.Choice(["heat", "vsp"]), default="heat", show_default=True,
+              help="The landmark fields' solver: the heat method (~1.9% from exact; the shipped landmark models "
+                   "up to v2) or virtual source propagation (vsp: ~0.15% from exact, ~1.5 ms a field at 5k "
+                   "vertices). A model reads the fields it was trained with.")
 @click.option("--landmark-no-embedding", is_flag=True, help="Ablation: the decoder reads landmarks only.")
 @click.option("--landmark-no-euclidean", is_flag=True, help="Ablation: drop the straight-line distance input.")
 @click.option("--spectral", default=0, show_default=True, metavar="M",
@@ -133,8 +138,8 @@ def _blocks(ctx, param, value):
                    "fields (default 0: meshes). With --init, a mesh model's weights start it.")
 @old_name("--points", "--neighbors", "old_points", type=click.IntRange(0), is_flag=False, flag_value=8)
 def train(run_dir, no_rotate, preset_name, init_ckpt, channels, blocks, aggr, no_edge_length, no_relative_position,
-          plain_grid_pool, euclidean_decoder, landmarks, landmark_no_embedding, landmark_no_euclidean, spectral,
-          spectral_no_embedding, landmark_output, neighbors, old_points, **options):
+          plain_grid_pool, euclidean_decoder, landmarks, landmark_fields, landmark_no_embedding, landmark_no_euclidean,
+          spectral, spectral_no_embedding, landmark_output, neighbors, old_points, **options):
     """Train GeGnn on the geodata store STORE.
 
     \b
@@ -159,7 +164,7 @@ def train(run_dir, no_rotate, preset_name, init_ckpt, channels, blocks, aggr, no
                             edge_length=not no_edge_length, relative_position=not no_relative_position,
                             sigma_n=math.inf if plain_grid_pool else GeGnnConfig.sigma_n,
                             decoder="euclidean" if euclidean_decoder else "mlp", landmarks=landmarks,
-                            landmark_embedding=not landmark_no_embedding,
+                            landmark_fields=landmark_fields, landmark_embedding=not landmark_no_embedding,
                             landmark_euclidean=not landmark_no_euclidean, landmark_output=landmark_output,
                             spectral=spectral, spectral_embedding=not spectral_no_embedding, points=points, **extra)
     if preset_name:  # the preset's architecture where no option asked for another

@@ -244,8 +244,8 @@ def build_model(cfg: TrainConfig, model_config, resume, device, log=None):
     With ``--init`` the network is the checkpoint's; where ``model_config`` asks for a decoder of its own
     (landmarks, spectral modes or the Euclidean decoder), its decoder options replace the checkpoint's,
     so a paper model's weights can start a landmark-guided or a biharmonic one (the new decoder starts
-    fresh). A landmark decoder is kept for another K: its features are means and extremes over the
-    landmarks, its weights the same for any K."""
+    fresh). A landmark decoder is kept for another K (its features are means and extremes over the
+    landmarks, its weights the same for any K) and for fields of another solver (``landmark_fields``)."""
     if resume is not None:
         model_config = resume.config
     elif cfg.init:
@@ -265,10 +265,10 @@ def build_model(cfg: TrainConfig, model_config, resume, device, log=None):
     if cfg.init and resume is None:
         state = init.model_state
         # The same decoder reads other inputs: another distance, points instead of meshes, or (its
-        # weights do not depend on K) another number of landmarks.
+        # weights do not depend on K) another number of landmarks, or fields of another solver.
         same_input = dict(distance=init.config.distance, points=init.config.points)
         if model_config.landmarks and init.config.landmarks:
-            same_input["landmarks"] = init.config.landmarks
+            same_input.update(landmarks=init.config.landmarks, landmark_fields=init.config.landmark_fields)
         if dataclasses.replace(model_config, **same_input) != init.config:
             # another decoder: none of the old one's weights
             state = {k: v for k, v in state.items() if not k.startswith("distance.")}

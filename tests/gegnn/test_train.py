@@ -177,7 +177,8 @@ def test_init_weights_are_the_starting_point(tiny_store, tmp_path):
 
 def test_init_keeps_a_landmark_decoder_for_another_k(tiny_store, tmp_path):
     """--init from a K = 4 landmark model with --landmarks 8: every tensor, the decoder's included, is the
-    checkpoint's (its weights do not depend on K); another decoder form (interval) starts its own."""
+    checkpoint's (its weights do not depend on K), also with fields of another solver (--landmark-fields vsp);
+    another decoder form (interval) starts its own."""
     torch.manual_seed(0)
     k4 = GeGnn(small_config(landmarks=4))
     with torch.no_grad():  # a decoder unlike a fresh one (whose last layer is zero)
@@ -190,6 +191,9 @@ def test_init_keeps_a_landmark_decoder_for_another_k(tiny_store, tmp_path):
     ckpt = load_checkpoint(tmp_path / "k4.safetensors").model_state
     assert k8.state_dict().keys() == ckpt.keys()
     assert all(torch.equal(v, ckpt[k].to(v.dtype)) for k, v in k8.state_dict().items())
+    vsp = gtrain.build_model(init, small_config(landmarks=8, landmark_fields="vsp"), None, torch.device("cpu"))[0]
+    assert vsp.config.landmark_fields == "vsp"  # fields of another solver: the same decoder, kept whole
+    assert all(torch.equal(v, ckpt[k].to(v.dtype)) for k, v in vsp.state_dict().items())
     interval = gtrain.build_model(init, small_config(landmarks=8, landmark_output="interval"), None,
                                   torch.device("cpu"))[0].state_dict()
     decoder = [k for k in interval if k.startswith("distance.") and k.endswith("weight")]
