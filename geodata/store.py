@@ -26,6 +26,7 @@ import os
 import socket
 import time
 import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -247,7 +248,8 @@ def read_mesh(out: str | Path, mesh_id: str, subgroup: str | None = None):
 def damage(out: str | Path, mesh_id: str, subgroup: str | None = None, thorough: bool = False) -> str | None:
     """Why a published zip is damaged, or None where it looks whole (also where it is not published). Quick by
     default: the zip's directory, read from its end, must list the group (an empty, truncated or zero-filled
-    file fails). ``thorough``: every member's CRC is checked and the group's ``status`` must be "ok"."""
+    file fails). ``thorough``: every member's CRC is checked and the group's ``status`` must be "ok". A file
+    that cannot be read at all (no permission, an I/O error) raises OSError: that is not damage to redo."""
     path = mesh_file(out, mesh_id, subgroup)
     try:
         if path.stat().st_size == 0:
@@ -264,7 +266,7 @@ def damage(out: str | Path, mesh_id: str, subgroup: str | None = None, thorough:
                     return f"status {status!r}, not 'ok'"
     except FileNotFoundError:
         return None
-    except (zipfile.BadZipFile, zipfile.LargeZipFile, EOFError, OSError, ValueError) as exc:
+    except (zipfile.BadZipFile, EOFError, ValueError, zlib.error) as exc:  # not an OSError: no permission is no damage
         return f"not a readable zip: {one_line_error(exc)}"
     return None
 
