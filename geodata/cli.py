@@ -163,8 +163,9 @@ def prepare(raw_dir, out, pairs, target_vertices, collapse, seed, geodesic_backe
     """Prepare every mesh file under RAW_DIR (OBJ/OFF/PLY/STL/GLB, searched recursively) into store OUT.
 
     Stages: load, watertight (manifold3d), isotropic remesh (pymeshlab), QEM edge collapse,
-    normalize to [-1,1], exact geodesic pairs. A mesh counts once its group is committed; a rerun
-    skips committed meshes and redoes the rest, so a killed run loses nothing. Bad input is recorded
+    normalize to [-1,1], exact geodesic pairs. A mesh counts once its zip is published; a rerun
+    skips published meshes and redoes the rest (and any found damaged), so a killed run loses nothing; an
+    input edited since is prepared again (its old mesh becomes an orphan: `geodata info`). Bad input is recorded
     under failed/ with the stage and reason and the batch goes on; the exit status is still 0 (use
     --strict for 1). Several RAW_DIRs may be prepared into one store (same options): ids come from
     file contents.
@@ -228,8 +229,8 @@ def biharmonic(out, pairs, seed, timeout, retry_failed, check, **scale):
     """Add exact biharmonic distances to every committed mesh of store OUT.
 
     Distances follow Lipman, Rustamov and Funkhouser (2010) with libigl's cotangent Laplacian and
-    Voronoi mass matrix, from one sparse factorization per mesh. Written under
-    meshes/<id>/biharmonic/, whose own status "ok" is written last; reruns skip finished meshes.
+    Voronoi mass matrix, from one sparse factorization per mesh. Written as meshes/<id>.biharmonic.zip,
+    published whole; reruns skip finished meshes and redo damaged ones.
     """
     from geodata.biharmonic_runner import BiharmonicConfig, process_biharmonic
 
@@ -272,8 +273,8 @@ def points(out, n_points, pairs, seed, timeout, retry_failed, check, **scale):
 
     The points are inserted into the mesh as vertices (the same surface, refined), so the exact solver's
     distances between them are exact, and a point that falls on a vertex has that vertex's distances.
-    Written under meshes/<id>/points/ (xyz, normals, face, bary, pairs, distances), whose own status "ok"
-    is written last; reruns skip finished meshes.
+    Written as meshes/<id>.points.zip (xyz, normals, face, bary, pairs, distances), published whole; reruns
+    skip finished meshes and redo damaged ones.
     """
     from geodata.points_runner import PointsConfig, process_points
 
