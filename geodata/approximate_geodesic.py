@@ -23,7 +23,8 @@ faster), linear in the mesh beyond the cache (160 ms at 337k); memory ~0.5 kB a 
 run on threads, with the same fields for any thread count.
 
 Unlike the exact solver it needs no closed surface: boundaries are fine, vertices of other connected parts
-get ``inf``; edges shared by three or more faces are refused.
+get ``inf``, faces may be oriented against each other; edges shared by three or more faces and vertices
+whose faces form two or more fans (pinched) are refused.
 """
 from __future__ import annotations
 
@@ -39,11 +40,12 @@ class ApproximateGeodesicSolver:
 
     Args:
         vertices: (N, 3) float coordinates, all finite.
-        faces: (M, 3) integer vertex indices in [0, N); no edge may belong to three or more faces.
+        faces: (M, 3) integer vertex indices in [0, N); no edge in three or more faces, no vertex whose
+            faces form two or more fans.
 
     Raises:
         ValueError: naming what is wrong with the mesh (shapes, non-finite coordinates, indices out of
-            range, non-manifold edges).
+            range, non-manifold edges or vertices).
     """
 
     def __init__(self, vertices, faces):
@@ -51,7 +53,7 @@ class ApproximateGeodesicSolver:
 
         vertices, faces = _checked_mesh(vertices, faces)
         self.n_vertices = len(vertices)
-        self._native = VirtualSources(vertices, faces)  # counts non-manifold edges (ValueError)
+        self._native = VirtualSources(vertices, faces)  # counts non-manifold edges and vertices (ValueError)
 
     def distances(self, sources, threads: int | None = None) -> np.ndarray:
         """Distances from each source vertex to every vertex.

@@ -40,7 +40,8 @@
 // relative 1e-12, so the propagation ends. The order changes the fixed point little.
 //
 // Edges are paired by their two vertices: an edge with one face is a boundary (no face across it), one
-// with three or more is refused. Vertices of other connected parts stay at infinity. Memory: 64 bytes a
+// with three or more is refused, and so is a vertex whose faces form two or more fans (nothing hands a
+// source through a vertex). Faces may be oriented against each other. Vertices of other connected parts stay at infinity. Memory: 64 bytes a
 // half-edge (its unfolding, one cache line), 48 a face and 24 a vertex, and per thread 72 a face and 8
 // a vertex: ~0.5 kB a vertex in all.
 #include <nanobind/nanobind.h>
@@ -228,6 +229,9 @@ public:
         build_frames(positions.data());
         build_unfoldings();
         build_vertex_faces();
+        if (const int64_t pinched = count_pinched())
+            throw std::invalid_argument(std::to_string(pinched) +
+                                        " non-manifold vertices (their faces form two or more fans)");
     }
 
     int64_t n_vertices() const { return n_; }
@@ -464,6 +468,34 @@ private:
         u.ty = -(ey * pa.x - ex * pa.y);
         u.packed = g << 3 | kg << 1 | (same ? 1 : 0);
         u.vc = F_[3 * g + (kg + 2) % 3];
+    }
+
+    // Vertices whose faces fall into two or more fans joined by no edge through the vertex: a source's
+    // paths would have to pass through the vertex itself, which no face hands on.
+    int64_t count_pinched() const {
+        int64_t pinched = 0;
+        std::vector<int> faces, stack;
+        std::vector<char> seen;
+        for (int64_t v = 0; v < n_; ++v) {
+            if (vf_start_[v] == vf_start_[v + 1]) continue;  // in no face
+            faces.assign(vf_.begin() + vf_start_[v], vf_.begin() + vf_start_[v + 1]);
+            seen.assign(faces.size(), 0);
+            seen[0] = 1;
+            stack.assign(1, 0);
+            size_t reached = 1;
+            while (!stack.empty()) {  // the fan of the first face, across the edges through v
+                const int h = faces[stack.back()];
+                stack.pop_back();
+                const int f = h / 3, j = h % 3;
+                for (const int e : {3 * f + j, 3 * f + (j + 2) % 3}) {
+                    const int g = across_[e].packed < 0 ? -1 : across_[e].g();
+                    for (size_t i = 0; g >= 0 && i < faces.size(); ++i)
+                        if (!seen[i] && faces[i] / 3 == g) seen[i] = 1, ++reached, stack.push_back(static_cast<int>(i));
+                }
+            }
+            if (reached < faces.size()) ++pinched;
+        }
+        return pinched;
     }
 
     void build_vertex_faces() {
