@@ -4,6 +4,7 @@ and the heat method: accuracy and time per field, on one core (issue 55, item 1)
     python benchmarks/bench_field_solver.py [--meshes max homer camel ...] [--levels 0 1] [--sources 8]
         [--sweep] [--ablation]
     python benchmarks/bench_field_solver.py --lower-bound [MESH ...]
+    python benchmarks/bench_field_solver.py --raw
 
 Per mesh, a base of ~3-7k vertices and its midpoint subdivisions (``trimesh.remesh.subdivide`` keeps the
 base's vertices and the surface, so the exact distances between base vertices stay the truth at every
@@ -23,6 +24,8 @@ near an edge (needle triangles, angles down to ~1 degree).
 
 --sweep: decimated-max at 5k, 20k, 80k, 320k vertices (2 sources; the heat method up to 80k).
 --ablation: the solver's design choices on the real meshes (probe point, saddle gates, queue, bucket width).
+--raw: every mesh of ../shared/meshes (both splits) under 10k vertices that is a closed manifold as loaded
+(the exact solver's condition), unremeshed: CAD parts with needle triangles, furniture; 3 sources each.
 --lower-bound: issue 55's table: the triangle-inequality lower bound LB(i, j) = max_k |d(i, l_k) - d(j, l_k)|
 over the first K of 256 farthest-point landmarks (chosen on the heat method's fields in rounds of 16, as
 today's models do; "own landmarks": chosen on the new fields), against exact distances from 20 sources to
@@ -105,7 +108,8 @@ def best_of(fn, repeat: int) -> float:
 def errors(fields: np.ndarray, exact: np.ndarray, sources) -> np.ndarray:
     """Relative errors (S x base vertices, sources left out) of fields (S, >= base) against exact (S, base)."""
     n = exact.shape[1]
-    e = np.abs(fields[:, :n] - exact) / np.where(exact > 0, exact, np.nan)
+    with np.errstate(invalid="ignore", divide="ignore"):  # inf - inf on other parts: left out as NaN
+        e = np.abs(fields[:, :n] - exact) / np.where(exact > 0, exact, np.nan)
     e[np.arange(len(sources)), sources] = np.nan
     return e[np.isfinite(e)]
 
@@ -186,6 +190,37 @@ def ablation(names, n_sources, repeat):
         print(f"| {label} | " + " | ".join(cells) + f" | {100 * np.mean(means):.3f}% |", flush=True)
 
 
+def raw_meshes(limit: int = 10000):
+    import csv
+
+    import trimesh
+
+    from geodata.mesh import closed_manifold_problem
+
+    root = DEV.parent
+    rows = list(csv.DictReader(open(root / "MANIFEST.tsv"), delimiter="\t"))
+    results = []
+    for r in rows:
+        if int(r["n_vertices"]) > limit:
+            continue
+        m = trimesh.load(root / r["relative_path"], process=True, force="mesh")
+        mesh = Mesh(np.asarray(m.vertices), np.asarray(m.faces))
+        if mesh.n_faces == 0 or closed_manifold_problem(mesh) is not None:
+            continue
+        sources = np.array([0, mesh.n_vertices // 3, mesh.n_vertices // 2])
+        exact = geodesic_solver(mesh)
+        truth = np.stack([exact(int(s)) for s in sources])
+        err = errors(VirtualSources(mesh.vertices, mesh.faces).distances(sources), truth, sources)
+        results.append((err.mean(), r["relative_path"], mesh.n_vertices))
+    results.sort()
+    means = np.array([e for e, _, _ in results])
+    print(f"\nraw closed manifold meshes of ../shared/meshes under {limit} vertices: {len(results)}; mean error "
+          f"a mesh: median {100 * np.median(means):.3f}%, mean {100 * means.mean():.3f}%, "
+          f"{int((means > 0.002).sum())} over 0.2%, {int((means > 0.01).sum())} over 1%; the worst:")
+    for e, path, n in results[-6:]:
+        print(f"| {path} | {n:,} | {100 * e:.2f}% |")
+
+
 def lower_bound_errors(fields: np.ndarray, truth: np.ndarray, sources, ks) -> list[float]:
     """Mean relative error of LB over sources x vertices (the source left out), for the first K columns
     of ``fields`` (N, 256), each K of ``ks``."""
@@ -229,11 +264,15 @@ def main():
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--sweep", action="store_true")
     ap.add_argument("--ablation", action="store_true")
+    ap.add_argument("--raw", action="store_true")
     ap.add_argument("--lower-bound", nargs="*", metavar="MESH", help="issue 55's LB table on these meshes "
                     "(default: max homer camel)")
     args = ap.parse_args()
     torch.set_num_threads(1)  # the heat method's solves run on torch's thread count: one core for all three
     print(f"CPU: {cpu_description()}")
+    if args.raw:
+        raw_meshes()
+        return
     if args.lower_bound is not None:
         lower_bound_table(args.lower_bound or ["max", "homer", "camel"])
         return

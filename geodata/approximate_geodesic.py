@@ -17,7 +17,8 @@ Measured against the exact solver (:func:`geodata.geodesic.geodesic_solver`; ben
 bench_field_solver.py, docs/benchmarks.md "Fast geodesic fields"): mean relative error 0.01-0.21% a mesh
 over twelve classic meshes of 3-8k vertices (0.14% on average; 0.01-0.19% on their midpoint
 subdivisions), where the heat method's landmark fields are 0.7-5.3% off; the worst vertex of a field is
-1-10% off (where two families of paths meet, one source per face keeps one of them). Cost on one core:
+1-10% off (where two families of paths meet, one source per face keeps one of them). Raw CAD meshes
+with needle triangles fare worse (up to 5% on one; training meshes are remeshed first). Cost on one core:
 1.3-1.8 ms a field at 5-6k vertices, 15-40x less than the exact solver (the heat method is still 2-5x
 faster), linear in the mesh beyond the cache (160 ms at 337k); memory ~0.5 kB a vertex. Several sources
 run on threads, with the same fields for any thread count.
