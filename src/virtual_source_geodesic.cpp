@@ -295,7 +295,8 @@ private:
         for (int k = 0; k < 3; ++k) {
             const Across& u = across_[3 * f + k];
             if (u.packed < 0 || k == from.entered) continue;
-            const int g = u.g(), va = F_[3 * g + u.kg()], vb = F_[3 * g + (u.kg() + 1) % 3];
+            const int g = u.g();
+            auto vertex = [&](bool at_b) { return F_[3 * g + (u.kg() + at_b) % 3]; };  // at A or B: when needed
             const double L = u.L, cx = u.cx, cy = u.cy, mx = (L + cx) / 3.0, my = cy / 3.0;
             const Point C = {cx, cy};
             Point t = u.map({from.x, from.y});
@@ -314,10 +315,10 @@ private:
             bool straight = false;
             Point p = C;
             if (t.y > ON_EDGE * L) {
-                const bool at_a = d[va] + norm(mx, my) <= d[vb] + norm(mx - L, my);
+                const bool at_a = d[vertex(false)] + norm(mx, my) <= d[vertex(true)] + norm(mx - L, my);
                 c_x = p_x = at_a ? -1.0 : 2.0 * L + 1.0;
                 t = {at_a ? 0.0 : L, 0.0};
-                sigma = d[at_a ? va : vb];
+                sigma = d[vertex(!at_a)];
             } else if (t.y >= -ON_EDGE * L) {
                 c_x = p_x = t.x;
             } else {
@@ -360,13 +361,13 @@ private:
             } else if (!(p_x >= lo && p_x <= hi)) {
                 const bool at_b = p_x > L;
                 t = {at_b ? L : 0.0, 0.0};
-                sigma = d[at_b ? vb : va];
+                sigma = d[vertex(at_b)];
                 if (!(sigma < INF)) continue;
                 gl = gr = {NAN, NAN};
                 tie = 1.0 + BENT;
-            } else if (straight && !c_gate && c_x < lo && excess_[va] > saddle) {
+            } else if (straight && !c_gate && c_x < lo && excess_[vertex(false)] > saddle) {
                 gl = {0.0, 0.0};
-            } else if (straight && !c_gate && c_x > hi && excess_[vb] > saddle) {
+            } else if (straight && !c_gate && c_x > hi && excess_[vertex(true)] > saddle) {
                 gr = {L, 0.0};
             }
             if (!straight && !p_gate) gl = gr = {NAN, NAN};
