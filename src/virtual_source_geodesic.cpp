@@ -329,7 +329,7 @@ private:
             }
             // a point X is seen past the gates unless it is left of the ray to gl or right of the ray to gr
             auto blocked_by = [&](Point X) -> int {  // 0: seen, 1: left gate, 2: right gate
-                if (!straight) return 0;
+                if (!straight || !from.gated) return 0;
                 if (!std::isnan(gl.x) && cross(t, gl, X) > 0.0) return 1;
                 if (!std::isnan(gr.x) && cross(t, gr, X) < 0.0) return 2;
                 return 0;
@@ -375,7 +375,7 @@ private:
             Source& to = w.faces[g];
             if (at_m < to.best * (1.0 - SETTLED)) {  // into g's frame
                 const Point a = corner(g, u.kg()), b = corner(g, (u.kg() + 1) % 3);
-                const double ex = (b.x - a.x) / L, ey = (b.y - a.y) / L;
+                const double inv = 1.0 / L, ex = (b.x - a.x) * inv, ey = (b.y - a.y) * inv;
                 auto face = [&](Point q) { return Point{a.x + q.x * ex - q.y * ey, a.y + q.x * ey + q.y * ex}; };
                 const Point s = face(t);
                 const bool gated = !std::isnan(gl.x) || !std::isnan(gr.x);
