@@ -202,8 +202,8 @@ struct Workspace {
 class VirtualSources {
 public:
     VirtualSources(const double* V, int64_t n, const int64_t* F, int64_t m) : n_(n), m_(m) {
-        if (n >= (int64_t(1) << 31) || 3 * m >= (int64_t(1) << 31))
-            throw std::invalid_argument("more than 2^31 vertices or face corners");
+        if (n >= (int64_t(1) << 31) || m >= (int64_t(1) << 28))  // a face's index is packed in 29 bits
+            throw std::invalid_argument("more than 2^31 vertices or 2^28 faces");
         for (int64_t i = 0; i < 3 * n; ++i)
             if (!std::isfinite(V[i])) throw std::invalid_argument("a vertex coordinate is not finite");
         for (int64_t i = 0; i < 3 * m; ++i)
