@@ -60,6 +60,13 @@ CLAIMS = [
     ("time.paper", "docs/index.md", r"`GeGnn\.pretrained\(\"paper\"\)`: the paper's model \| [\d.]+% \| ([\d.]+ s)"),
     ("time.paper", "docs/queries.md", r"`GeGnn\.pretrained\(\"paper\"\)`: the paper's model \| [\d.]+% \| ([\d.]+ s)"),
     ("time.paper", "docs/model-card.md", r"1M random queries 0\.10 s \(the compiled decode\), \*\*([\d.]+ s)\*\* in all"),
+    # what training on one's own meshes costs (docs/own-data.md's estimates rest on these)
+    ("prepare.mesh.cpu", "docs/own-data.md", r"\| `geodata prepare --pairs 100000` \| ([\d.]+ s) \| mesh"),
+    ("train.fields.landmark.cpu", "docs/own-data.md", r"\| landmark fields \(K = 256, 4 draws\), before the first step \| ([\d.]+ s) \|"),
+    ("train.step.landmark.cpu", "docs/own-data.md", r"\| a training step of `--model landmark` \(4 meshes, 20,000 pairs each\) \| ([\d.]+ s) \|"),
+    ("train.step.paper256.cpu", "docs/own-data.md", r"the paper's 256-channel network\) \| ([\d.]+ s) \| step"),
+    ("train.step.landmark.cpu", "gegnn/training/estimate.py", r"one thread; [\d.]+ s against ([\d.]+ s) on a"),
+    ("train.step.paper256.cpu", "gegnn/training/estimate.py", r"one thread; ([\d.]+ s) against [\d.]+ s on a"),
     # the viewer's page
     ("page.landmark-v2.5k", "docs/queries.md", r"K = 256\): \*\*([\d.]+ MiB)\*\* at 4,762 vertices"),
     ("page.landmark-v2.50k", "docs/queries.md", r"at 4,762 vertices, ([\d.]+ MiB) at\s+50k"),

@@ -18,8 +18,8 @@ MEASURED_STEPS = 3     # steps timed after the first (which also starts the load
 GPU_STEP_S = 0.09      # an H100's training step, batch 4 x 5k vertices (docs/gpu.md: 74-86 ms at 256 channels)
 GPU_HINT_S = 1800      # a CPU run longer than this gets the GPU hint
 # CPU seconds a step of the paper's 256-channel network over the 64-channel landmark preset's, same batches
-# (batch 4, 20,000 pairs a mesh, the six `geodata examples` meshes, one thread; 18.8 s against 4.2 s on a
-# 2-core AMD EPYC, 2026-11-27: benchmarks/bench_own_data.py).
+# (batch 4, 20,000 pairs a mesh, the six `geodata examples` meshes, one thread; 17.5 s against 3.9 s on a
+# 2-core AMD EPYC, 2026-11-27: benchmarks/bench_own_data.py, docs/results.json).
 PRESET_SPEEDUP = 4.5
 
 
