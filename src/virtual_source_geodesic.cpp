@@ -77,17 +77,19 @@ constexpr double SEEN = 1e-9;
 constexpr double BENT = 1e-10;
 
 // Dial's buckets of width `width`, first in first out within a bucket; keys below the current bucket
-// go into it.
+// go into it, keys beyond the last of `count` buckets into the last (a mesh of tiny edges and a few
+// long ones must not allocate a bucket per tiny edge along its diameter; the order only costs time).
 class Buckets {
 public:
-    void reset(double width) {
+    void reset(double width, size_t count) {
         for (auto& b : buckets_) b.clear();
         width_ = width;
+        last_ = count - 1;
         current_ = pos_ = 0;
     }
     void push(double key, int id) {
-        const double slot = key / width_;
-        const size_t b = std::max(current_, slot < 1e9 ? static_cast<size_t>(slot) : size_t(1e9));
+        const double slot = std::min(key / width_, static_cast<double>(last_));
+        const size_t b = std::max(current_, static_cast<size_t>(slot));
         if (b >= buckets_.size()) buckets_.resize(b + 1);
         buckets_[b].emplace_back(key, id);
     }
@@ -106,12 +108,12 @@ public:
 private:
     std::vector<std::vector<std::pair<double, int>>> buckets_;
     double width_ = 1.0;
-    size_t current_ = 0, pos_ = 0;
+    size_t last_ = 0, current_ = 0, pos_ = 0;
 };
 
 class Heap {
 public:
-    void reset(double) { heap_ = {}; }
+    void reset(double, size_t) { heap_ = {}; }
     void push(double key, int id) { heap_.emplace(key, id); }
     bool pop(double& key, int& id) {
         if (heap_.empty()) return false;
@@ -244,7 +246,7 @@ public:
         double* d = w.d.data();
         w.faces.assign(m_, Source{0.0, 0.0, INF, INF, -1, 0});
         w.gates.resize(m_);
-        queue.reset(bucket * mean_edge_);
+        queue.reset(bucket * mean_edge_, static_cast<size_t>(m_) + 1024);
         d[source] = 0.0;
         for (int i = vf_start_[source]; i < vf_start_[source + 1]; ++i) {
             const int f = vf_[i] / 3, k = vf_[i] % 3;
