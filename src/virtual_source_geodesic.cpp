@@ -56,11 +56,12 @@
 #include <limits>
 #include <queue>
 #include <stdexcept>
-#include <tuple>
 #include <string>
-#include <thread>
+#include <tuple>
 #include <utility>
 #include <vector>
+
+#include "threads.h"
 
 namespace nb = nanobind;
 
@@ -554,10 +555,7 @@ Out solve(const VirtualSources& surface, const Sources& sources, int64_t threads
             processed += w.processed;
         };
         const int64_t team = std::max<int64_t>(1, std::min<int64_t>(threads, static_cast<int64_t>(k)));
-        std::vector<std::thread> helpers;
-        for (int64_t t = 1; t < team; ++t) helpers.emplace_back(work);
-        work();
-        for (auto& h : helpers) h.join();
+        run_parts(team, [&](int64_t) { work(); });  // each takes sources until none is left
     }
     if (processed_total) *processed_total = processed;
     return Out(out, {k, n}, owner);
