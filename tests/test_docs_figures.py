@@ -67,6 +67,8 @@ CLAIMS = [
     ("train.step.paper256.cpu", "docs/own-data.md", r"the paper's 256-channel network\) \| ([\d.]+ s) \| step"),
     ("train.step.landmark.cpu", "gegnn/training/estimate.py", r"one thread; [\d.]+ s against ([\d.]+ s) on a"),
     ("train.step.paper256.cpu", "gegnn/training/estimate.py", r"one thread; ([\d.]+ s) against [\d.]+ s on a"),
+    ("mre.category.shipped", "docs/own-data.md", r"\| shipped `landmark` \| ([\d.]+%) \|"),
+    ("mre.category.finetuned", "docs/own-data.md", r"\| fine-tuned from it, one epoch on the other shapes \| \*\*([\d.]+%)\*\* \|"),
     # the viewer's page
     ("page.landmark-v2.5k", "docs/queries.md", r"K = 256\): \*\*([\d.]+ MiB)\*\* at 4,762 vertices"),
     ("page.landmark-v2.50k", "docs/queries.md", r"at 4,762 vertices, ([\d.]+ MiB) at\s+50k"),
