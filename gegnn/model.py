@@ -28,8 +28,9 @@ __all__ = ["GeGnnConfig", "GeGnn", "DistanceDecoder", "LandmarkDecoder", "Spectr
 
 # Shipped models, in gegnn/weights/, made by `gegnn export` (docs/model-card.md); the first is the default.
 PRETRAINED = {
-    "landmark": "gegnn-landmark-v2.safetensors",  # landmark-guided, K = 256: the most accurate
-    "landmark-v1": "gegnn-landmark-v1.safetensors",  # the previous default, K = 128
+    "landmark": "gegnn-landmark-v3.safetensors",  # landmark-guided, K = 256 fields by virtual sources: the most accurate
+    "landmark-v2": "gegnn-landmark-v2.safetensors",  # the previous default, K = 256 heat-method fields
+    "landmark-v1": "gegnn-landmark-v1.safetensors",  # the one before, K = 128
     "paper": "gegnn-classic-v1.safetensors",      # the paper's model (no landmarks)
     "biharmonic": "gegnn-biharmonic-v1.safetensors",  # biharmonic distances: spectral codes + Weyl tail
     "points": "gegnn-points-v2.safetensors",      # point clouds: the landmark model's weights on a kNN graph
@@ -277,7 +278,8 @@ class GeGnn(nn.Module):
 
         Args:
             name: a key of :data:`PRETRAINED`: ``"landmark"`` (the default: the most accurate geodesic
-                model, K = 256 landmarks), ``"landmark-v1"`` (the previous default, K = 128), ``"paper"``
+                model, landmark-v3: K = 256 landmark fields by virtual source propagation), ``"landmark-v2"``
+                (the previous default, heat-method fields), ``"landmark-v1"`` (K = 128), ``"paper"``
                 (the paper's model), ``"biharmonic"`` (biharmonic distances), ``"points"`` (point clouds:
                 ``model.embed(points)``) or ``"points-v1"`` (the previous one).
         """

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The shipped landmark-guided models, rebuilt and measured (docs/model-card.md), after
 # pipelines/pretrained/data.sh:   bash pipelines/landmark/ship.sh data/ runs/
-# landmark-v2 (K = 256, the default) from landmark-v1, and its point-cloud twin points-v2; the training on
+# landmark-v2 (K = 256, the default until 2026-11-27) from landmark-v1, and its point-cloud twin points-v2; the training on
 # at K = 384 (the K ablation's v3, not shipped); then their validation MRE and the default's speed-up over
 # the heat method, the shipped models' written to docs/results.json (tests/test_docs_figures.py then names
 # every page that must follow).
@@ -20,6 +20,11 @@ gegnn export "$weights/gegnn-landmark-v2.safetensors" "$weights/gegnn-points-v2.
 bash pipelines/landmark/more_landmarks.sh "$data" "$runs" 384 "$weights/gegnn-landmark-v2.safetensors" lm384-v3
 gegnn export "$runs/lm384-v3/best.safetensors" "$runs/gegnn-landmark-v3.safetensors" --dtype fp16
 
+# landmark-v3 (K = 256, the default since 2026-11-27): v2's weights trained on landmark fields by virtual sources
+bash pipelines/landmark/more_landmarks.sh "$data" "$runs" 256 "$weights/gegnn-landmark-v2.safetensors" lm256-v3 vsp
+gegnn export "$runs/lm256-v3/best.safetensors" "$weights/gegnn-landmark-v3.safetensors" --dtype fp16
+
+python benchmarks/ablation_k.py "$data/val.zarr" "landmark-v3=$weights/gegnn-landmark-v3.safetensors" --record
 python benchmarks/ablation_k.py "$data/val.zarr" "landmark-v2=$weights/gegnn-landmark-v2.safetensors" \
     "landmark-v1=$weights/gegnn-landmark-v1.safetensors" --record
 python benchmarks/ablation_k.py "$data/val.zarr" "v2@384=$weights/gegnn-landmark-v2.safetensors@384" \
