@@ -32,6 +32,8 @@ from pathlib import Path
 import numpy as np
 import zarr
 
+from geodata.mesh import one_line
+
 __all__ = ["StoreError", "DamagedMeshError", "FORMAT", "SUBGROUPS", "create_store", "open_store", "geometry_key",
            "mesh_file", "temporary_name", "publish", "write_mesh", "read_mesh", "damage", "remove_damaged",
            "mesh_attrs", "list_meshes", "record_failure", "clear_failure", "list_failures", "write_ledger",
@@ -267,12 +269,8 @@ def damage(out: str | Path, mesh_id: str, subgroup: str | None = None, thorough:
     except FileNotFoundError:
         return None
     except (zipfile.BadZipFile, EOFError, ValueError, zlib.error) as exc:  # not an OSError: no permission is no damage
-        return f"not a readable zip: {one_line_error(exc)}"
+        return f"not a readable zip: {one_line(exc, with_type=False)}"
     return None
-
-
-def one_line_error(exc: BaseException) -> str:
-    return " ".join(str(exc).split()) or type(exc).__name__
 
 
 def remove_damaged(out: str | Path, mesh_id: str, subgroup: str | None = None) -> bool:
@@ -381,7 +379,7 @@ def read_ledger_files(out: str | Path) -> tuple[dict[str, dict], dict[str, str]]
                 raise ValueError("no root, written or inputs")
             ledgers[path.stem] = ledger
         except (json.JSONDecodeError, OSError, ValueError, AttributeError) as exc:
-            damaged[path.stem] = " ".join(str(exc).split()) or type(exc).__name__
+            damaged[path.stem] = one_line(exc, with_type=False)
     return ledgers, damaged
 
 
