@@ -14,26 +14,9 @@ import trimesh
 from geodata.approximate_geodesic import ApproximateGeodesicSolver, approximate_geodesic_distances
 from geodata.geodesic import geodesic_solver
 from geodata.mesh import Mesh
+from flat_meshes import grid, l_shape, open_prism
 
 DEV = Path(__file__).resolve().parents[3] / "shared" / "meshes" / "dev"
-
-
-def grid(n, jitter=0.0, seed=0, keep=None):
-    """An n x n grid over [0, 1]^2 in the plane z = 0, interior vertices moved by up to `jitter` cells,
-    cells whose centre fails keep(x, y) left out."""
-    rng = np.random.default_rng(seed)
-    x, y = np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n), indexing="ij")
-    v = np.stack([x.ravel(), y.ravel(), np.zeros(n * n)], axis=1)
-    inner = (v[:, 0] > 0) & (v[:, 0] < 1) & (v[:, 1] > 0) & (v[:, 1] < 1)
-    v[inner, :2] += rng.uniform(-jitter, jitter, (inner.sum(), 2)) / n
-    faces = []
-    for i in range(n - 1):
-        for j in range(n - 1):
-            if keep is None or keep((i + 0.5) / (n - 1), (j + 0.5) / (n - 1)):
-                a, b, c, d = i * n + j, (i + 1) * n + j, i * n + j + 1, (i + 1) * n + j + 1
-                faces += [[a, b, c], [c, b, d]]
-    used, f = np.unique(np.array(faces), return_inverse=True)
-    return v[used], f.reshape(-1, 3)
 
 
 def relative_errors(d, exact):
@@ -44,7 +27,8 @@ def relative_errors(d, exact):
 
 
 def test_flat_jittered_grid_is_euclidean():
-    v, f = grid(30, jitter=0.3)  # 0.4 folds a few triangles over: no longer a plane
+    mesh = grid(30, jitter=0.3)  # 0.4 folds a few triangles over: no longer a plane
+    v, f = mesh.vertices, mesh.faces
     sources = [0, 437, len(v) - 1]
     d = approximate_geodesic_distances(v, f, sources, threads=1)
     expect = np.linalg.norm(v[None, :, :] - v[sources][:, None, :], axis=-1)
@@ -52,34 +36,16 @@ def test_flat_jittered_grid_is_euclidean():
 
 
 def test_l_shaped_plane_goes_around_its_reflex_corner():
-    v, f = grid(21, keep=lambda x, y: x < 0.5 or y < 0.5)  # [0,1]^2 without the square (0.5,1)^2
-    p, corner = v[:, :2], np.array([0.5, 0.5])
-    source = int(np.argmin(np.linalg.norm(p - [1.0, 0.0], axis=1)))  # on the boundary
-    t = np.linspace(0, 1, 2001)[:, None, None]
-    seg = p[source] + t * (p[None] - p[source])
-    blocked = ((seg[..., 0] > 0.5 + 1e-9) & (seg[..., 1] > 0.5 + 1e-9)).any(axis=0)
-    expect = np.where(blocked, np.linalg.norm(p[source] - corner) + np.linalg.norm(p - corner, axis=1),
-                      np.linalg.norm(p - p[source], axis=1))
-    assert blocked.sum() > 50
-    np.testing.assert_allclose(approximate_geodesic_distances(v, f, source)[0], expect, rtol=1e-12, atol=1e-12)
+    mesh, source, expect = l_shape()
+    d = approximate_geodesic_distances(mesh.vertices, mesh.faces, source)[0]
+    np.testing.assert_allclose(d, expect, rtol=1e-12, atol=1e-12)
 
 
 def test_open_prism_is_its_unrolled_strip():
-    n, rings, radius = 24, 9, 0.5
-    k, z = np.meshgrid(np.arange(n), np.linspace(0, 1, rings), indexing="xy")
-    angle = 2 * np.pi * k.ravel() / n
-    v = np.stack([radius * np.cos(angle), radius * np.sin(angle), z.ravel()], axis=1)
-    idx = np.arange(rings * n).reshape(rings, n)
-    a, b = idx[:-1], np.roll(idx[:-1], -1, axis=1)
-    c, d = idx[1:], np.roll(idx[1:], -1, axis=1)
-    f = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([c, b, d], -1).reshape(-1, 3)])
-    side = 2 * radius * np.sin(np.pi / n)
-    sources = [0, 5 * n + 7, (rings - 1) * n + 3]  # boundary rings and the middle
-    fields = approximate_geodesic_distances(v, f, sources)
-    for source, field in zip(sources, fields):
-        steps = np.abs(k.ravel() - k.ravel()[source])
-        expect = np.hypot(np.minimum(steps, n - steps) * side, z.ravel() - z.ravel()[source])
-        np.testing.assert_allclose(field, expect, rtol=1e-12, atol=1e-12)
+    mesh, sources, expect = open_prism()
+    fields = approximate_geodesic_distances(mesh.vertices, mesh.faces, sources)
+    for field, exact in zip(fields, expect):
+        np.testing.assert_allclose(field, exact, rtol=1e-12, atol=1e-12)
 
 
 def test_sphere_is_within_a_tenth_of_a_percent_of_great_circles_and_exact():
@@ -133,7 +99,8 @@ def test_faces_oriented_against_each_other_are_as_accurate():
 
 
 def test_bad_input_is_refused_in_the_meshs_terms():
-    v, f = grid(5)
+    mesh = grid(5)
+    v, f = mesh.vertices, mesh.faces
     with pytest.raises(ValueError, match="1 faces index vertices out of range"):
         approximate_geodesic_distances(v, np.vstack([f, [0, 1, 25]]), [0])
     bad = v.copy()

@@ -13,6 +13,7 @@ import trimesh
 
 from geodata.geodesic import edge_flip_paths, geodesic_solver, polyline_length
 from geodata.mesh import Mesh, vertex_components
+from flat_meshes import grid, l_shape, open_prism
 
 TRAIN = Path(__file__).resolve().parents[3] / "shared" / "meshes" / "train"
 RTOL = 1e-9
@@ -52,56 +53,15 @@ def flipout_lengths(mesh, source, targets):
     return np.array([polyline_length(p) for p in edge_flip_paths(mesh, [(source, t) for t in targets], True)])
 
 
-def grid(n, jitter=0.0, height=0.0, seed=0, keep=None):
-    """An n x n grid over [0, 1]^2 (cells where keep(center) is false left out), interior vertices moved by
-    up to `jitter` cells, z a random height field of amplitude `height` (obtuse triangles, saddles)."""
-    rng = np.random.default_rng(seed)
-    x, y = np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n), indexing="ij")
-    v = np.stack([x.ravel(), y.ravel(), height * rng.standard_normal(n * n)], axis=1)
-    inner = (v[:, 0] > 0) & (v[:, 0] < 1) & (v[:, 1] > 0) & (v[:, 1] < 1)
-    v[inner, :2] += rng.uniform(-jitter, jitter, (inner.sum(), 2)) / n
-    faces = []
-    for i in range(n - 1):
-        for j in range(n - 1):
-            if keep is None or keep((i + 0.5) / (n - 1), (j + 0.5) / (n - 1)):
-                a, b, c, d = i * n + j, (i + 1) * n + j, i * n + j + 1, (i + 1) * n + j + 1
-                faces += [[a, b, c], [c, b, d]]
-    f = np.array(faces)
-    used, f = np.unique(f, return_inverse=True)
-    return Mesh(v[used], f.reshape(-1, 3))
-
-
 def test_l_shaped_plane_goes_around_its_reflex_corner():
-    mesh = grid(21, keep=lambda x, y: x < 0.5 or y < 0.5)  # [0,1]^2 without the square (0.5,1)^2
-    v = mesh.vertices[:, :2]
-    corner = np.array([0.5, 0.5])
-    source = int(np.argmin(np.linalg.norm(v - [1.0, 0.0], axis=1)))  # on the boundary
-    d = vtp(mesh, source)
-    t = np.linspace(0, 1, 2001)[:, None, None]
-    seg = v[source] + t * (v[None] - v[source])  # points along each straight segment
-    blocked = ((seg[..., 0] > 0.5 + 1e-9) & (seg[..., 1] > 0.5 + 1e-9)).any(axis=0)
-    expect = np.where(blocked, np.linalg.norm(v[source] - corner) + np.linalg.norm(v - corner, axis=1),
-                      np.linalg.norm(v - v[source], axis=1))
-    assert blocked.sum() > 50
-    np.testing.assert_allclose(d, expect, rtol=1e-12, atol=1e-12)
+    mesh, source, expect = l_shape()
+    np.testing.assert_allclose(vtp(mesh, source), expect, rtol=1e-12, atol=1e-12)
 
 
 def test_open_prism_is_its_unrolled_strip():
-    n, rings, radius = 24, 9, 0.5
-    k, z = np.meshgrid(np.arange(n), np.linspace(0, 1, rings), indexing="xy")
-    angle = 2 * np.pi * k.ravel() / n
-    v = np.stack([radius * np.cos(angle), radius * np.sin(angle), z.ravel()], axis=1)
-    idx = np.arange(rings * n).reshape(rings, n)
-    a, b = idx[:-1], np.roll(idx[:-1], -1, axis=1)
-    c, d = idx[1:], np.roll(idx[1:], -1, axis=1)
-    f = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([c, b, d], -1).reshape(-1, 3)])
-    mesh = Mesh(v, f)
-    side = 2 * radius * np.sin(np.pi / n)
-    for source in (0, 5 * n + 7, (rings - 1) * n + 3):  # boundary rings and the middle
-        steps = np.abs(k.ravel() - k.ravel()[source])
-        around = np.minimum(steps, n - steps) * side
-        expect = np.hypot(around, z.ravel() - z.ravel()[source])
-        np.testing.assert_allclose(vtp(mesh, source), expect, rtol=1e-12, atol=1e-12)
+    mesh, sources, expect = open_prism()
+    for source, exact in zip(sources, expect):
+        np.testing.assert_allclose(vtp(mesh, source), exact, rtol=1e-12, atol=1e-12)
 
 
 def test_sphere_approaches_great_circles_and_equals_libigl():
