@@ -66,19 +66,19 @@ def proxy_of(vertices: np.ndarray, faces: np.ndarray, target_vertices: int) -> P
     size = np.bincount(labels, minlength=n_parts)
     whole = (size <= goal) | (size <= 2 * PART_VERTICES)
     face, bary = np.full(len(v), -1, dtype=np.int64), np.zeros((len(v), 3))
-    pieces, offset = [], 0  # the proxy's vertices and faces, part by part
+    local = np.empty(len(v), dtype=np.int64)  # a vertex's index in its piece (each vertex in one piece at most)
+    pieces, offset = [], [0, 0]  # the proxy's pieces; the vertices and faces before the next one
 
     def add(piece: Mesh) -> int:
-        nonlocal offset
-        first = sum(len(p.faces) for p in pieces)
-        pieces.append(Mesh(piece.vertices, piece.faces + offset))
-        offset += piece.n_vertices
+        """Append a piece; the index of its first face in the proxy."""
+        first = offset[1]
+        pieces.append(Mesh(piece.vertices, piece.faces + offset[0]))
+        offset[0], offset[1] = offset[0] + piece.n_vertices, offset[1] + piece.n_faces
         return first
 
     kept = np.flatnonzero(whole[face_part])
     if len(kept):  # the parts kept whole, in one piece: each vertex at a corner of one of its faces
         idx = np.flatnonzero(whole[labels])
-        local = np.full(len(v), -1, dtype=np.int64)
         local[idx] = np.arange(len(idx))
         first = add(Mesh(v[idx], local[f[kept]]))
         for k in range(3):
@@ -87,7 +87,6 @@ def proxy_of(vertices: np.ndarray, faces: np.ndarray, target_vertices: int) -> P
     vertex_groups, face_groups = label_groups(labels, n_parts), label_groups(face_part, n_parts)
     for c in np.flatnonzero(~whole):
         idx = vertex_groups[c]
-        local = np.empty(len(v), dtype=np.int64)
         local[idx] = np.arange(len(idx))
         coarse = decimate(v[idx], local[f[face_groups[c]]], int(goal[c]))
         places = locate_points(coarse, v[idx])
