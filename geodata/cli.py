@@ -226,7 +226,7 @@ def _runner(jobs, backend, scheduler):
 @CHECK_OPTION
 @_scale_options
 def biharmonic(out, pairs, seed, timeout, retry_failed, check, **scale):
-    """Add exact biharmonic distances to every committed mesh of store OUT.
+    """Add exact biharmonic distances to every published mesh (meshes/<id>.zip) of store OUT.
 
     Distances follow Lipman, Rustamov and Funkhouser (2010) with libigl's cotangent Laplacian and
     Voronoi mass matrix, from one sparse factorization per mesh. Written as meshes/<id>.biharmonic.zip,
@@ -268,7 +268,7 @@ def _add_subgroup(out, subgroup, process, config, retry_failed, check, jobs, bac
 @CHECK_OPTION
 @_scale_options
 def points(out, n_points, pairs, seed, timeout, retry_failed, check, **scale):
-    """Add surface points with exact geodesic distances between them to every committed mesh of store OUT
+    """Add surface points with exact geodesic distances between them to every published mesh of store OUT
     (the data of point-cloud models).
 
     The points are inserted into the mesh as vertices (the same surface, refined), so the exact solver's
