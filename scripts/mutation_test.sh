@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Mutation testing (mutmut 3) of modules that carry contracts: small bugs put into the code one at a time,
 # each run against the tests that cover the mutated function. By hand or on a schedule, not in CI (tens of
-# minutes a module on 2 cores). Results and the surviving mutants: docs/testing.md.
+# minutes a module on 2 cores). Where each module stands: docs/testing.md; each run and its survivors: docs/notes/test-runs.md.
 #
 #   pip install mutmut
 #   bash scripts/mutation_test.sh WORKDIR MODULE.py [MODULE.py ...] -- TEST_PATH [TEST_PATH ...]

@@ -7,7 +7,7 @@
 #                                            the slurm.conf it wrote)
 # It refuses a machine with a SLURM of its own: a slurm.conf it did not write, or a munged, slurmctld or slurmd
 # it did not start; it never stops a process by name. Its settings, and which are SLURM's defaults:
-# docs/cluster.md. SLURM_SINGLE_NODE_CONF and SLURM_SINGLE_NODE_STATE move its slurm.conf and state (tests).
+# docs/notes/slurm-test-clusters.md. SLURM_SINGLE_NODE_CONF and SLURM_SINGLE_NODE_STATE move its slurm.conf and state (tests).
 set -euo pipefail
 export PATH="$PATH:/usr/sbin:/sbin"  # the daemons, where a user's PATH lacks them
 conf=${SLURM_SINGLE_NODE_CONF:-/etc/slurm/slurm.conf}
@@ -71,7 +71,7 @@ if [ ! -s /etc/munge/munge.key ]; then
 fi
 chown -R munge:munge /etc/munge /var/log/munge /run/munge /var/lib/munge 2>/dev/null || true
 chmod 0700 /etc/munge; chmod 0400 /etc/munge/munge.key
-# Defaults of slurm.conf unless said: docs/cluster.md has the table.
+# Defaults of slurm.conf unless said: docs/notes/slurm-test-clusters.md has the table.
 cat > "$conf" <<CONF
 $mark
 ClusterName=single

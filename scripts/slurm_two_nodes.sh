@@ -10,7 +10,7 @@
 # Clients run in the controller's namespace with its slurm.conf:
 #   SLURM_CONF=STATE/slurm.conf nsenter --net=/run/netns/geo-ctl sbatch ...
 # (slurmd is started with nsenter --net, not ip netns exec, which remounts /sys: slurmd then finds no cgroup
-# file system.) STATE: SLURM_TWO_NODES_STATE, default /var/spool/slurm-two-nodes. Settings: docs/cluster.md.
+# file system.) STATE: SLURM_TWO_NODES_STATE, default /var/spool/slurm-two-nodes. Settings: docs/notes/slurm-test-clusters.md.
 set -euo pipefail
 export PATH="$PATH:/usr/sbin:/sbin"
 state=${SLURM_TWO_NODES_STATE:-/var/spool/slurm-two-nodes}
@@ -106,7 +106,7 @@ cpus=$(nproc --all)  # the machine's: nproc alone follows OMP_NUM_THREADS, which
 memory=$(( ($(awk '/MemTotal/ {print $2}' /proc/meminfo) / 1024 - 2048) / 2 ))  # MiB per node
 mkdir -p "$state/ctld" "$state/log" "$state/d-${nodes[0]}" "$state/d-${nodes[1]}"
 cat > "$state/slurm.conf" <<CONF
-# written by scripts/slurm_two_nodes.sh; defaults of slurm.conf unless said (docs/cluster.md has the table)
+# written by scripts/slurm_two_nodes.sh; defaults of slurm.conf unless said (docs/notes/slurm-test-clusters.md has the table)
 ClusterName=geotwo
 SlurmctldHost=$ctl($net.1)
 SlurmUser=root

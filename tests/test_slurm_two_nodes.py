@@ -1,6 +1,6 @@
 """The SLURM recipes on a real two-node SLURM on this one machine (scripts/slurm_two_nodes.sh: slurmctld and
 two slurmd, each in a network namespace with its own address and hostname, CPU binding on, MinJobAge=30; its
-settings and which are SLURM's defaults: docs/cluster.md): the chain with 4 shards spread over both nodes,
+settings and which are SLURM's defaults: docs/notes/slurm-test-clusters.md): the chain with 4 shards spread over both nodes,
 per-stage flags and an option holding a space, a running shard cancelled and its record purged, recovered by
 recover.sh from the store, then training on 2 nodes x 1 process (gloo, c10d rendezvous across the
 namespaces). Skipped where the cluster cannot start; under CI=true that is a failure."""
