@@ -9,7 +9,8 @@ over a CUDA build of torch). Steps, each a process of its own whose exit status 
 
   environment   CUDA is there, the compiled kernels and pytest import; versions
   tests         the CUDA tests (no host sync in a training step, CUDA embedding and queries equal the CPU's
-                at one precision), the GPU-path guards, and the trainer's tests, which train on the GPU there
+                at one precision), the GPU-path guards, and the trainer's tests, which train on the GPU there;
+                in pytest-xdist workers where it is installed (4 on 16 cores: pytest_workers)
   bench-gpu     embed and 1M queries against the paper's RTX 3090 figures, fp32 against bf16, CUDA against
                 the CPU, a training step with and without --deterministic (benchmarks/bench_gpu.py)
   data          the toolkit's sample meshes prepared (or --store, a store prepared elsewhere)
@@ -31,6 +32,7 @@ from __future__ import annotations
 import argparse
 import csv
 import datetime
+import importlib.util
 import os
 import platform
 import re
@@ -43,6 +45,16 @@ from pathlib import Path
 
 EVAL_RTOL = 2e-3  # GPU and CPU fp32 MRE of a mesh: sums in another order, nothing more
 TRAIN = ["--batch-size", "1", "--pairs-per-mesh", "20000", "--lr", "1e-3", "--device", "cuda"]
+COMPILED = ("geodata._exact_geodesic", "geodata._virtual_source_geodesic", "gegnn._pair_features", "gegnn._geoconv",
+            "gegnn._heat_ops", "gegnn._farthest_points", "gegnn._cloud_ops", "gegnn._local_triangulation")
+CORES_PER_TEST_WORKER = 4  # a trainer test runs loader processes of its own
+
+
+def pytest_workers(cores: int, xdist: bool) -> list[str]:
+    """pytest-xdist's arguments for the tests step: one worker per CORES_PER_TEST_WORKER cores, at most 4,
+    where pytest-xdist is installed and that makes two or more (the tests run one after another otherwise)."""
+    n = min(4, cores // CORES_PER_TEST_WORKER)
+    return ["-n", str(n)] if xdist and n >= 2 else []
 
 
 @dataclass
@@ -125,12 +137,9 @@ def compare_evals(gpu_csv: Path, cpu_csv: Path, rtol: float = EVAL_RTOL) -> list
 def check_environment(log) -> None:
     import torch
 
-    import importlib
-
     import pytest
 
-    for name in ("geodata._exact_geodesic", "gegnn._pair_features", "gegnn._geoconv", "gegnn._heat_ops",
-                 "gegnn._farthest_points", "gegnn._cloud_ops", "gegnn._local_triangulation"):
+    for name in COMPILED:
         importlib.import_module(name)  # the compiled kernels: pip install built them
 
     if not torch.cuda.is_available():
@@ -188,7 +197,8 @@ def make_steps(out: Path, store: Path | None, gegnn: list[str]) -> list[Step]:
     return [
         Step("environment", [], check_environment, required=True),
         Step("tests", [py, "-m", "pytest", "-q", "-p", "no:cacheprovider", "tests/gegnn/test_gpu_path.py",
-                       "tests/gegnn/test_train.py", "--durations", "10"]),
+                       "tests/gegnn/test_train.py", "--durations", "10",
+                       *pytest_workers(len(os.sched_getaffinity(0)), importlib.util.find_spec("xdist") is not None)]),
         Step("bench-gpu", [py, "benchmarks/bench_gpu.py"]),
         Step("data", [], data),
         Step("train-paper", [*gegnn, "train", str(store), "--run", str(out / "paper"), "--channels", "64",
@@ -214,7 +224,8 @@ def write_report(out: Path, results, path: Path) -> None:
 
     gpu = subprocess.run(["nvidia-smi", "--query-gpu=name,memory.total,driver_version", "--format=csv,noheader"],
                          capture_output=True, text=True).stdout.strip() if shutil.which("nvidia-smi") else ""
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,  # '' outside a clone
+                            text=True).stdout.strip() if shutil.which("git") else ""  # a node without git
     cpu = next((line.split(":", 1)[1].strip() for line in open("/proc/cpuinfo") if line.startswith("model name")), "?")
     lines = ["# GPU check", "",
              f"`scripts/gpu_check.sh` on {datetime.date.today()}, commit {commit or '?'}.", "",

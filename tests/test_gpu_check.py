@@ -100,3 +100,34 @@ def test_the_whole_check_without_cuda_stops_after_the_environment(tmp_path, caps
     assert sorted(p.name for p in (tmp_path / "check").iterdir()) == ["REPORT.md", "environment.log"]
     report = (tmp_path / "check" / "REPORT.md").read_text()
     assert "| tests | not run |" in report and f"**{last}**" in report
+
+
+def test_the_tests_step_runs_in_xdist_workers_only_where_there_are_cores_and_xdist():
+    """The tests step (the check's long pole: 392 s of 663 on an H100, one test at a time) runs in one
+    pytest-xdist worker per 4 cores, at most 4; one after another without xdist or on a small machine."""
+    assert gpu_check.pytest_workers(16, True) == ["-n", "4"]
+    assert gpu_check.pytest_workers(64, True) == ["-n", "4"]
+    assert gpu_check.pytest_workers(8, True) == ["-n", "2"]
+    assert gpu_check.pytest_workers(4, True) == [] and gpu_check.pytest_workers(2, True) == []
+    assert gpu_check.pytest_workers(16, False) == []
+    tests = next(s for s in gpu_check.make_steps(Path("out"), None, ["gegnn"]) if s.name == "tests")
+    assert tests.argv[:3] == [sys.executable, "-m", "pytest"] and "tests/gegnn/test_train.py" in tests.argv
+
+
+def test_the_environment_step_imports_every_compiled_module_cmake_builds():
+    """The environment step imports each module CMakeLists.txt builds (eight: the virtual source solver's too)."""
+    import re
+
+    built = re.findall(r"^geogegnn_module\((\w+) \S+ (\w+)", (ROOT / "CMakeLists.txt").read_text(), re.M)
+    assert sorted(gpu_check.COMPILED) == sorted(f"{package}.{name}" for name, package in built)
+    assert len(built) == 8
+
+
+def test_the_report_is_written_on_a_machine_without_git_or_nvidia_smi(tmp_path, monkeypatch):
+    """A GPU node may run the check from an unpacked snapshot with no git (nor nvidia-smi) on its PATH: the
+    report is still written, its commit '?', after all the steps have run."""
+    monkeypatch.setenv("PATH", str(tmp_path / "empty"))
+    gpu_check.write_report(tmp_path, [("environment", True, 1.0)], tmp_path / "REPORT.md")
+    report = (tmp_path / "REPORT.md").read_text()
+    assert "commit ?." in report and "| environment | PASS | 1 s |" in report
+    assert "**GPU check: PASS (all 1 steps)**" in report
