@@ -63,48 +63,56 @@ constexpr double BUCKET = 0.05;  // bucket width / mean edge length  // bucket w
 
 struct Window {
     double b0, b1, sx, sy, sigma;
-    double near;    // its least distance: when it is due
-    int h;          // its half-edge
-    int next = -1;  // the next window waiting on the same half-edge (-1: none); once free, the next free slot
+    int h;  // its half-edge
 };
-static_assert(std::is_trivially_copyable_v<Window>, "windows live in a realloc'ed block");
+constexpr int CHUNK = 16;
+// Windows wait on their half-edge in chunks, so that a sweep reads them from neighbouring memory (one
+// window a slot, linked through a pool, cost a cache miss each: 40% of the time at 160k vertices;
+// chunks of 5 / 10 / 16 / 32 windows: 7.9 / 7.0 / 6.7 / 6.8 s against 12 s, one source, 160k).
+struct Chunk {
+    Window w[CHUNK];
+    int n;     // windows in it
+    int next;  // the half-edge's next chunk, or the next free one (-1: none)
+};
+static_assert(std::is_trivially_copyable_v<Chunk>, "chunks live in a realloc'ed block");
 
-// The waiting windows of one source, in one block that grows by realloc (for a large block the C
-// library remaps the pages instead of copying them), with a list of free slots: a window that crossed
-// leaves its slot to the next one made, so the block holds the largest wavefront. It is reused by the
-// next source.
-class WindowStore {
+// The chunks of one source, in one block that grows by realloc (for a large block the C library remaps
+// the pages instead of copying them), with a list of free chunks: a half-edge that swept gives its
+// chunks to the windows made next, so the block holds the largest wavefront. It is reused by the next
+// source.
+class ChunkStore {
 public:
-    WindowStore() = default;
-    WindowStore(const WindowStore&) = delete;
-    WindowStore& operator=(const WindowStore&) = delete;
-    ~WindowStore() { std::free(data_); }
+    ChunkStore() = default;
+    ChunkStore(const ChunkStore&) = delete;
+    ChunkStore& operator=(const ChunkStore&) = delete;
+    ~ChunkStore() { std::free(data_); }
     void clear() { size_ = 0, free_ = -1; }
-    Window& operator[](int i) { return data_[i]; }
+    Chunk& operator[](int i) { return data_[i]; }
     void release(int i) {
         data_[i].next = free_;
         free_ = i;
     }
-    int push(const Window& w) {
-        if (free_ >= 0) {
-            const int i = free_;
+    int take(int next) {  // an empty chunk before `next`; may move the store
+        int i = free_;
+        if (i >= 0) {
             free_ = data_[i].next;
-            data_[i] = w;
-            return i;
+        } else {
+            if (size_ == capacity_) {
+                const size_t grown = std::max<size_t>(256, 2 * capacity_);
+                void* p = std::realloc(data_, grown * sizeof(Chunk));
+                if (p == nullptr) throw std::bad_alloc();
+                data_ = static_cast<Chunk*>(p);
+                capacity_ = grown;
+            }
+            i = static_cast<int>(size_++);
         }
-        if (size_ == capacity_) {
-            const size_t grown = std::max<size_t>(1024, 2 * capacity_);
-            void* p = std::realloc(data_, grown * sizeof(Window));
-            if (p == nullptr) throw std::bad_alloc();
-            data_ = static_cast<Window*>(p);
-            capacity_ = grown;
-        }
-        data_[size_] = w;
-        return static_cast<int>(size_++);
+        data_[i].n = 0;
+        data_[i].next = next;
+        return i;
     }
 
 private:
-    Window* data_ = nullptr;
+    Chunk* data_ = nullptr;
     size_t size_ = 0, capacity_ = 0;
     int free_ = -1;
 };
@@ -216,7 +224,7 @@ public:
         std::fill(best_d_.begin(), best_d_.end(), INF);
         std::fill(head_.begin(), head_.end(), -1);
         std::fill(due_.begin(), due_.end(), -1);
-        windows_.clear();
+        chunks_.clear();
         queue_.reset(width_);
         source_ = static_cast<int>(source);
         improve(source_, 0.0);
@@ -242,10 +250,14 @@ private:
     std::vector<double> d_, best_d_, best_sp_;
     std::vector<double> emitted_;  // per vertex: the distance at which it last lit its edges
     double width_ = 1.0;
-    WindowStore windows_;
+    ChunkStore chunks_;
     std::vector<int> head_;      // per half-edge: the windows waiting on it (-1: none)
     std::vector<int64_t> due_;  // per half-edge: the bucket it is queued in (-1: none; older entries are stale)
-    std::vector<Window> batch_;
+    std::vector<Window> batch_;  // the windows of the half-edge that sweeps
+    struct Paths {
+        double to0, to1, sp, planar;  // distances at b0 and b1; where the path to C crosses, its length
+    };
+    std::vector<Paths> paths_;
     BucketQueue queue_;
     int source_ = 0;
 
@@ -356,7 +368,7 @@ private:
         s0 = std::max(s0, 0.0);
         s1 = std::min(s1, L);
         if (s1 <= s0) return;
-        add_window({s0, s1, fx(sx, sy), std::min(fy(sx, sy), 0.0), sigma, 0.0, t});
+        add_window({s0, s1, fx(sx, sy), std::min(fy(sx, sy), 0.0), sigma, t});
     }
 
     // Cut the start or end of [b0, b1] where the other window is shorter by more than the margin (a
@@ -419,11 +431,11 @@ private:
             relay(at_start ? F_[w.h] : F_[next(w.h)]);
             return;
         }
-        w.near = w.sx < w.b0 ? to0 : (w.sx > w.b1 ? to1 : w.sigma - w.sy);
-        w.next = head_[w.h];
         const int h = w.h;
-        head_[h] = windows_.push(w);
-        schedule(h, w.near);
+        if (head_[h] < 0 || chunks_[head_[h]].n == CHUNK) head_[h] = chunks_.take(head_[h]);
+        Chunk& c = chunks_[head_[h]];
+        c.w[c.n++] = w;
+        schedule(h, w.sx < w.b0 ? to0 : (w.sx > w.b1 ? to1 : w.sigma - w.sy));  // its least distance
     }
 
     void schedule(int h, double key) {
@@ -441,17 +453,20 @@ private:
         due_[h] = -1;
         batch_.clear();
         for (int i = head_[h]; i >= 0;) {
-            batch_.push_back(windows_[i]);
-            const int after = windows_[i].next;
-            windows_.release(i);
+            const Chunk& c = chunks_[i];
+            batch_.insert(batch_.end(), c.w, c.w + c.n);
+            const int after = c.next;
+            chunks_.release(i);
             i = after;
         }
         head_[h] = -1;
         std::sort(batch_.begin(), batch_.end(), [](const Window& a, const Window& b) { return a.b0 < b.b0; });
         size_t kept = 0;  // batch_[0, kept): the survivors so far, by start
+        const double da = d_[F_[h]] * (1.0 + MARGIN), db = d_[F_[next(h)]] * (1.0 + MARGIN), len = len_[h];
         for (size_t i = 0; i < batch_.size(); ++i) {
             Window w = batch_[i];
-            if (useless(w, at(w, w.b0), at(w, w.b1))) continue;  // vertices may have improved since it came
+            // rule 1 again: the vertices may have improved since it came
+            if (at(w, w.b1) > da + w.b1 * (1.0 + MARGIN) || at(w, w.b0) > db + (len - w.b0) * (1.0 + MARGIN)) continue;
             bool alive = true, emptied = false;
             // back from the last survivor; past the last two, stop at the first that ends before w starts
             // (trimming leaves the starts only nearly sorted: a comparison missed only prunes less)
@@ -466,42 +481,36 @@ private:
                                                [](const Window& o) { return o.b1 < o.b0; }) - batch_.begin();
             if (alive) batch_[kept++] = w;
         }
-        batch_.resize(kept);
         const double cx = cx_[h], cy = cy_[h];
-        for (const Window& w : batch_) {  // rule 2's best path over the whole batch before any crosses
-            if (cy <= 0.0) break;
-            const double sp = w.sx - w.sy * (cx - w.sx) / (cy - w.sy);
-            const double planar = w.sigma + hypot2(cx - w.sx, cy - w.sy);
-            if (sp >= w.b0 && sp <= w.b1 && planar < best_d_[h]) {
-                best_d_[h] = planar;
-                best_sp_[h] = sp;
+        if (cy <= 0.0) return;  // a degenerate face lights nothing
+        const int c = F_[prev(h)];
+        paths_.resize(kept);
+        for (size_t i = 0; i < kept; ++i) {  // rule 2's best path over the whole batch before any crosses
+            const Window& w = batch_[i];
+            Paths& x = paths_[i];
+            x.to0 = at(w, w.b0), x.to1 = at(w, w.b1);
+            // where the ray from S to C crosses the edge, and the distance to C through the window
+            x.sp = w.sx - w.sy * (cx - w.sx) / (cy - w.sy);
+            x.planar = w.sigma + hypot2(cx - w.sx, cy - w.sy);
+            if (x.sp < w.b0)
+                improve(c, x.to0 + hypot2(cx - w.b0, cy));
+            else if (x.sp > w.b1)
+                improve(c, x.to1 + hypot2(cx - w.b1, cy));
+            else {
+                improve(c, x.planar);
+                if (x.planar < best_d_[h]) best_d_[h] = x.planar, best_sp_[h] = x.sp;
             }
         }
-        for (const Window& w : batch_) propagate(w);  // children go to other half-edges, never to h
+        for (size_t i = 0; i < kept; ++i) propagate(batch_[i], paths_[i]);  // children go to other half-edges
     }
 
-    void propagate(const Window& w) {
+    // The window's rays across its face onto the two other edges (x: its distances and its path to the
+    // opposite vertex, from sweep), each side cut at the best path's crossing unless it is its own.
+    void propagate(const Window& w, const Paths& x) {
         const int h = w.h;
-        const int a = F_[h], b = F_[next(h)], c = F_[prev(h)];
-        const double L = len_[h], cx = cx_[h], cy = cy_[h];
-        const double to0 = at(w, w.b0), to1 = at(w, w.b1);
-        if (cy <= 0.0 || useless(w, to0, to1)) return;  // a degenerate face lights nothing
-        // where the ray from S to C crosses the edge, and the distance to C through the window
-        const double sp = w.sx - w.sy * (cx - w.sx) / (cy - w.sy);
-        const double planar = w.sigma + hypot2(cx - w.sx, cy - w.sy);
-        double to_c;
-        if (sp < w.b0)
-            to_c = to0 + hypot2(cx - w.b0, cy);
-        else if (sp > w.b1)
-            to_c = to1 + hypot2(cx - w.b1, cy);
-        else
-            to_c = planar;
-        improve(c, to_c);
+        const double L = len_[h], cx = cx_[h], cy = cy_[h], sp = x.sp;
         double left_end = std::min(w.b1, sp), right_start = std::max(w.b0, sp);
-        if (sp >= w.b0 && sp <= w.b1 && planar < best_d_[h]) {
-            best_d_[h] = planar;
-            best_sp_[h] = sp;
-        } else if (planar > best_d_[h] * (1.0 + MARGIN)) {
+        if (x.planar > best_d_[h] * (1.0 + MARGIN)) {
             left_end = std::min(left_end, best_sp_[h]);
             right_start = std::max(right_start, best_sp_[h]);
         }
