@@ -25,7 +25,8 @@ run on threads, with the same fields for any thread count.
 
 Unlike the exact solver it needs no closed surface: boundaries are fine, vertices of other connected parts
 get ``inf``, faces may be oriented against each other; edges shared by three or more faces and vertices
-whose faces form two or more fans (pinched) are refused.
+whose faces form two or more fans (pinched) are refused. :func:`manifold_copy` makes a copy of such a mesh
+that it takes (the landmark fields of a model's own proxy or a user's non-manifold mesh use it).
 """
 from __future__ import annotations
 
@@ -33,7 +34,7 @@ import os
 
 import numpy as np
 
-__all__ = ["ApproximateGeodesicSolver", "approximate_geodesic_distances"]
+__all__ = ["ApproximateGeodesicSolver", "approximate_geodesic_distances", "manifold_copy"]
 
 
 class ApproximateGeodesicSolver:
@@ -83,6 +84,52 @@ def approximate_geodesic_distances(vertices, faces, sources, threads: int | None
     """Approximate geodesic distances (S, N) float64 from each of ``sources`` to every vertex, by
     :class:`ApproximateGeodesicSolver` (prepare a solver once where a mesh serves several calls)."""
     return ApproximateGeodesicSolver(vertices, faces).distances(sources, threads)
+
+
+def manifold_copy(vertices, faces) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """A copy of a mesh that :class:`ApproximateGeodesicSolver` takes, for fields on one it refuses:
+
+    - faces with an edge of zero length (a repeated or coincident corner) are set aside: no path crosses them;
+    - on an edge of three or more faces, all but its first two (in face order) are set aside;
+    - a vertex whose remaining faces form two or more fans (joined by no edge through the vertex) becomes one
+      vertex a fan: the first fan keeps the index, the others get copies appended after the N vertices.
+
+    Returns vertices (N', 3), faces (M', 3), ``origin`` (N',) the input vertex of each, and the number of faces
+    set aside. A vertex's distance is the least of its copies' (``origin[N:]`` lists the copies). Paths that
+    crossed a set-aside face go around it, and paths through a split vertex another way, where there is one
+    (two squares joined at one corner become two parts): distances only grow, and only near the defects. A
+    vertex left in no face, or only reached through a split vertex, gets ``inf``."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+
+    vertices, faces = _checked_mesh(vertices, faces)
+    n = len(vertices)
+    nxt = np.roll(faces, -1, axis=1)
+    keep = (np.linalg.norm(vertices[faces] - vertices[nxt], axis=2) > 0).all(axis=1)
+    edge = np.sort(np.stack([faces, nxt], axis=2), axis=2).reshape(-1, 2)  # face i's edges at rows 3i..3i+2
+    key = edge[:, 0] * n + edge[:, 1]
+    order = np.lexsort((np.repeat(np.arange(len(faces)), 3), key))  # by edge, then face
+    order = order[np.repeat(keep, 3)[order]]
+    sorted_key = key[order]
+    start = np.r_[True, sorted_key[1:] != sorted_key[:-1]]
+    rank = np.arange(len(order)) - np.maximum.accumulate(np.where(start, np.arange(len(order)), 0))
+    keep[order[rank >= 2] // 3] = False  # the third and later faces of an edge
+    kept = faces[keep]
+    # corners (3M') joined through the edges at their vertex: corner c of vertex v meets edges (v, next) and
+    # (v, previous); corners of one vertex sharing such an edge are in one fan
+    corner = kept.ravel()
+    ends = np.concatenate([np.roll(kept, -1, axis=1).ravel(), np.roll(kept, 1, axis=1).ravel()])
+    link_key, link = np.unique(np.tile(corner, 2) * n + ends, return_inverse=True)
+    nc = len(corner)
+    graph = sp.coo_matrix((np.ones(2 * nc), (np.tile(np.arange(nc), 2), nc + link.ravel())),
+                          shape=(nc + len(link_key),) * 2)
+    fan = connected_components(graph, directed=False)[1][:nc]
+    pairs, which = np.unique(np.stack([corner, fan], axis=1), axis=0, return_inverse=True)
+    first = np.r_[True, pairs[1:, 0] != pairs[:-1, 0]]  # sorted by vertex: its first fan keeps the index
+    ids = pairs[:, 0].copy()
+    ids[~first] = n + np.arange(int((~first).sum()))
+    origin = np.concatenate([np.arange(n), pairs[~first, 0]])
+    return vertices[origin], ids[which.ravel()].reshape(-1, 3), origin, int(len(faces) - len(kept))
 
 
 def _checked_mesh(vertices, faces) -> tuple[np.ndarray, np.ndarray]:

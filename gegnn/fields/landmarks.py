@@ -150,18 +150,62 @@ def landmark_solver(vertices, faces, k: int, t_coef: float = T_COEF, batch: int 
 def _vsp_field(vertices, faces, t_coef: float, fields: int):
     """``fields(sources) -> (N, len(sources))`` by virtual source propagation
     (:class:`geodata.approximate_geodesic.ApproximateGeodesicSolver`, ~0.15% from exact, one thread: the
-    embedding's network runs beside it); a part it refuses (an edge of three or more faces) gets the heat
-    method's fields, with a warning naming the reason."""
-    from geodata.approximate_geodesic import ApproximateGeodesicSolver
+    embedding's network runs beside it). A part it refuses (an edge of three or more faces, a pinched vertex:
+    a proxy's decimation of a 1M-vertex mesh can make a few) is solved on its
+    :func:`geodata.approximate_geodesic.manifold_copy`, each vertex at the least of its copies' distances,
+    with a warning naming the defects; the heat method's fields only where even that copy is refused."""
+    import warnings
+
+    from geodata.approximate_geodesic import ApproximateGeodesicSolver, manifold_copy
 
     try:
         solver = ApproximateGeodesicSolver(vertices, faces)
+        return lambda sources: solver.distances(np.asarray(sources, dtype=np.int64), threads=1).T
     except ValueError as exc:
-        import warnings
-
-        warnings.warn(f"landmark fields by the heat method on a part of {len(vertices)} vertices: {exc}", stacklevel=2)
+        reason = str(exc)
+    v, f, origin, set_aside = manifold_copy(vertices, faces)
+    try:
+        solver = ApproximateGeodesicSolver(v, f)
+    except ValueError as exc:
+        warnings.warn(f"landmark fields by the heat method on a part of {len(vertices)} vertices: {reason}; "
+                      f"its manifold copy: {exc}", stacklevel=2)
         return _heat_field(vertices, faces, t_coef, fields)
-    return lambda sources: solver.distances(np.asarray(sources, dtype=np.int64), threads=1).T
+    n = len(vertices)
+    warnings.warn(f"landmark fields on a part of {n} vertices: {reason}: solved on a copy with {set_aside} "
+                  f"face(s) set aside and {len(v) - n} vertex copies", stacklevel=2)
+
+    def solve(sources):
+        d = solver.distances(np.asarray(sources, dtype=np.int64), threads=1).T  # (N', S)
+        out = d[:n].copy()
+        np.minimum.at(out, origin[n:], d[n:])
+        return _along_edges(out, vertices, faces)
+    return solve
+
+
+def _along_edges(fields: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """``fields`` (N, S) where its solver left a vertex unreached (``inf``: cut off by a manifold copy's
+    set-aside faces or split vertices; a connected part's vertices are all reachable along its edges) given
+    the shortest continuation along the mesh's edges from the reached ones (Bellman-Ford on the edges that
+    touch them, until nothing changes: a few rounds, as such islands are small); reached values stay. Left
+    at the largest finite value instead, such vertices would be the next landmarks of farthest-point
+    sampling."""
+    todo = ~np.isfinite(fields)
+    rows = todo.any(axis=1)
+    if not rows.any():
+        return fields
+    edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    edges = np.unique(np.sort(edges[rows[edges].any(axis=1)], axis=1), axis=0)
+    a, b = edges.T
+    w = np.linalg.norm(vertices[a] - vertices[b], axis=1)[:, None]
+    for _ in range(len(fields)):
+        step = fields.copy()
+        np.minimum.at(step, a, fields[b] + w)
+        np.minimum.at(step, b, fields[a] + w)
+        step = np.where(todo, step, fields)
+        if np.array_equal(step, fields):
+            break
+        fields = step
+    return fields
 
 
 def _heat_field(vertices, faces, t_coef: float, fields: int):

@@ -96,15 +96,25 @@ def test_virtual_source_fields_are_near_exact_where_the_heat_methods_are_not():
     assert bounds["vsp"] < 0.012 and bounds["heat"] > 1.5 * bounds["vsp"]
 
 
-def test_a_part_virtual_source_propagation_refuses_gets_the_heat_methods_fields_with_a_warning():
-    """An edge of three faces (a fin on a sphere): the heat method's fields for that part, said in a warning."""
+def test_a_part_virtual_source_propagation_refuses_is_solved_on_its_manifold_copy_with_a_warning():
+    """An edge of three faces (a fin on a sphere): the fields of the sphere without the fin on its vertices,
+    the fin's tip (its only face set aside) reached along its edges, said in a warning."""
+    from geodata.approximate_geodesic import ApproximateGeodesicSolver
+
     v, f = sphere(2)
     a, b = f[0, 0], f[0, 1]
-    v = np.vstack([v, 2 * v[a]])
-    f = np.vstack([f, [[a, b, len(v) - 1]]])
-    with pytest.warns(UserWarning, match="heat method .* non-manifold"):
-        got = landmark_fields(v, f, 8, fields="vsp")
-    np.testing.assert_array_equal(got.distances, landmark_fields(v, f, 8).distances)
+    tip = len(v)
+    fin_v = np.vstack([v, 2 * v[a]])
+    fin_f = np.vstack([f, [[a, b, tip]]])
+    with pytest.warns(UserWarning, match="1 non-manifold edges .* 1 face.s. set aside"):
+        got = landmark_fields(fin_v, fin_f, 8, fields="vsp")
+    landmarks = got.landmarks[0]
+    on_sphere = landmarks[landmarks < tip]
+    assert len(on_sphere) >= 7
+    expect = ApproximateGeodesicSolver(fin_v, f).distances(on_sphere, threads=1).T[:tip]  # the tip in no face
+    np.testing.assert_allclose(got.distances[:tip, landmarks < tip], expect, rtol=1e-6)
+    along = np.minimum(expect[a] + np.linalg.norm(v[a]), expect[b] + np.linalg.norm(fin_v[tip] - v[b]))
+    np.testing.assert_allclose(got.distances[tip, landmarks < tip], along, rtol=1e-6)
 
 
 @pytest.mark.parametrize("output", ["ratio", "interval"])

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from geodata.approximate_geodesic import ApproximateGeodesicSolver, approximate_geodesic_distances
+from geodata.approximate_geodesic import ApproximateGeodesicSolver, approximate_geodesic_distances, manifold_copy
 from geodata.geodesic import geodesic_solver
 from geodata.mesh import Mesh
 from flat_meshes import grid, l_shape, open_prism
@@ -122,3 +122,27 @@ def test_bad_input_is_refused_in_the_meshs_terms():
         approximate_geodesic_distances(v, f, [0, len(v)])
     with pytest.raises(ValueError, match=r"vertices must be \(N, 3\)"):
         approximate_geodesic_distances(v[:, :2], f, [0])
+
+
+def test_a_manifold_copy_sets_aside_extra_faces_of_an_edge_and_splits_pinched_vertices():
+    """A flat grid with a fin on one edge and a second grid touching it at one corner (a bowtie): the copy is
+    taken by the solver, keeps both grids whole (distances in each Euclidean), sets the fin's face aside,
+    gives the shared corner a second vertex, and the two grids become two parts."""
+    a, b = grid(6), grid(6)
+    v = np.vstack([a.vertices, b.vertices * [-1, -1, 1], [[0.1, 0.1, 1.0]]])  # b's vertex 0 at a's vertex 0
+    n = len(a.vertices)
+    fb = np.where(b.faces == 0, 0, b.faces + n)  # b shares vertex 0 with a
+    fin = [a.faces[0, 1], a.faces[0, 2], len(v) - 1]
+    f = np.vstack([a.faces, fb, [fin]])
+    with pytest.raises(ValueError):
+        ApproximateGeodesicSolver(v, f)
+    cv, cf, origin, set_aside = manifold_copy(v, f)
+    assert set_aside == 1 and len(cv) == len(v) + 1 and origin[-1] == 0
+    np.testing.assert_array_equal(cv, v[origin])
+    d = ApproximateGeodesicSolver(cv, cf).distances([0, len(cv) - 1], threads=1)
+    for field in d:  # one source in each grid: Euclidean in its own, unreached in the other
+        inside = np.isfinite(field)
+        assert inside.sum() == n  # b's own vertex 0 (index n) is in no face
+        src = cv[np.argmin(np.where(inside, field, np.inf))]
+        np.testing.assert_allclose(field[inside], np.linalg.norm(cv[inside] - src, axis=1), rtol=1e-12, atol=1e-14)
+    assert np.isfinite(d[:, n + 1:len(v) - 1].min(axis=0)).all()  # b reached from the corner's copy
