@@ -1,15 +1,22 @@
-"""Time and peak memory of geodata's exact solver (vtp, one source) with mesh size (issue 49, item 5).
+"""Time and peak memory of geodata's exact solver (vtp, one source) with mesh size, beside libigl where it
+runs (issue 49, item 5; issue 58).
 
-    python benchmarks/bench_exact_scaling.py [--kinds irregular regular] [--sizes 10000 20000 40000 80000 160000 320000]
+    python benchmarks/bench_exact_scaling.py [--kinds irregular regular]
+        [--sizes 10000 40000 160000 320000 1000000] [--libigl-max 40000]
 
-Each size runs in a fresh subprocess (``ru_maxrss`` is a process's peak): the mesh is built, the
-solver prepared (``geodesic_solver``), then one source solved; the peak resident memory before and
-after the solve and the solve's seconds are reported, with the estimate
-:func:`geodata.geodesic.exact_memory_estimate` beside them. Meshes on a bumped, stretched sphere
-(benchmarks/ablation_heat_time.py): ``irregular``, the convex hull of N random points on the unit sphere
-(slivers, uneven valences); ``regular``, trimesh's icosphere at the level nearest N (2,562 x 4^k
-vertices). A size whose estimate exceeds the memory available here is skipped, not run. The fits are
-least squares of log(seconds) and log(solve memory) on log(N) over the rows of each kind.
+Meshes on a bumped, stretched sphere (benchmarks/ablation_heat_time.py): ``irregular``, the convex hull
+of N random points on the unit sphere (slivers, uneven valences); ``regular``, trimesh's icosphere at the
+level nearest N (2,562 x 4^k vertices). Each mesh is built once in a child process and written to a
+temporary folder; then each solver runs in a fresh child of its own (``ru_maxrss`` is a process's
+peak, and the mesh's construction must not set it): the child loads the mesh, notes its resident memory,
+prepares the solver (``geodesic_solver``: the refusal check, then the mesh's half-edge tables), solves
+source 0 and reports the seconds of each step and its peak resident memory over what it held before the
+solver (the tables, the wavefront and the distances: the memory a solve needs), with the estimate
+:func:`geodata.geodesic.exact_memory_estimate` beside it. libigl runs the same source on meshes up to
+``--libigl-max`` vertices (it keeps every window: minutes and gigabytes beyond), and the largest
+relative difference of the two is reported. A size whose estimate exceeds the memory available here is
+skipped, not run. The fits are least squares of log(seconds) and log(memory) on log(N) over the rows of
+each kind.
 """
 from __future__ import annotations
 
@@ -17,39 +24,53 @@ import argparse
 import json
 import subprocess
 import sys
+import tempfile
+from pathlib import Path
 
 import numpy as np
 
 from machine import cpu_description  # benchmarks/ is on sys.path when a script there runs
 
-CHILD = r"""
-import json, resource, sys, time
+MAKE = r"""
+import sys
 import numpy as np
+import trimesh
 sys.path.insert(0, {bench!r})
 from ablation_heat_time import bumped_stretched
 from bench_exact_scaling import icosphere_level
-from geodata.geodesic import geodesic_solver
-from geodata.mesh import Mesh
 
 kind, n = {kind!r}, {n}
 if kind == "irregular":
-    import trimesh
     x = np.random.default_rng(0).standard_normal((n, 3))
     m = trimesh.convex.convex_hull(x / np.linalg.norm(x, axis=1, keepdims=True))
 else:
-    import trimesh
     m = trimesh.creation.icosphere(icosphere_level(n))
-v, f = bumped_stretched(m.vertices), np.asarray(m.faces)
+np.savez({path!r}, vertices=bumped_stretched(m.vertices), faces=np.asarray(m.faces, dtype=np.int32))
+"""
+
+SOLVE = r"""
+import json, resource, time
+import numpy as np
+from geodata.geodesic import geodesic_solver
+from geodata.mesh import Mesh
+
+def rss():
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[1]) * resource.getpagesize()
+
+data = np.load({path!r})
+mesh = Mesh(data["vertices"], data["faces"])
+start = rss()
 t0 = time.perf_counter()
-solve = geodesic_solver(Mesh(v, f))
+solve = geodesic_solver(mesh, {backend!r})
 prepare = time.perf_counter() - t0
-before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
 t0 = time.perf_counter()
 d = solve(0)
 seconds = time.perf_counter() - t0
-after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
 assert np.isfinite(d).all()
-print(json.dumps(dict(vertices=len(v), prepare=prepare, seconds=seconds, before=before, after=after)))
+np.save({out!r}, d)
+print(json.dumps(dict(vertices=mesh.n_vertices, prepare=prepare, seconds=seconds, memory=peak - start)))
 """
 
 
@@ -64,44 +85,68 @@ def fit(n, y) -> tuple[float, float]:
     return float(np.exp(log_a)), float(b)
 
 
+def child(code: str) -> dict | str:
+    """Run ``code`` in a fresh interpreter: its last line of output as JSON, or the last line of its error."""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    if out.returncode:
+        return (out.stderr.strip().splitlines() or [f"exit {out.returncode}"])[-1]
+    lines = out.stdout.strip().splitlines()
+    return json.loads(lines[-1]) if lines else {}
+
+
+def gib(b: float) -> str:
+    return f"{b / 2 ** 30:.2f} GiB"
+
+
 def main():
     from geodata.geodesic import available_memory, exact_memory_estimate
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--kinds", nargs="+", default=["irregular", "regular"])
-    ap.add_argument("--sizes", type=int, nargs="+", default=[10000, 20000, 40000, 80000, 160000, 320000])
+    ap.add_argument("--sizes", type=int, nargs="+", default=[10000, 40000, 160000, 320000, 1000000])
+    ap.add_argument("--libigl-max", type=int, default=40000, help="largest mesh libigl is run on")
     args = ap.parse_args()
-    bench = str(__import__("pathlib").Path(__file__).resolve().parent)
+    bench = str(Path(__file__).resolve().parent)
     print(f"CPU: {cpu_description()}; available memory {available_memory() / 2 ** 30:.1f} GiB")
-    print("| mesh | vertices | solve s | peak before solve | peak after | solve memory | estimate |")
-    print("|---|---:|---:|---:|---:|---:|---:|")
-    for kind in args.kinds:
-        rows = []
-        sizes = args.sizes if kind == "irregular" else sorted({10 * 4 ** icosphere_level(n) + 2 for n in args.sizes})
-        for n in sizes:
-            estimate = exact_memory_estimate(n)
-            if estimate > 0.8 * available_memory():
-                print(f"| {kind} | ~{n} | skipped: estimate {estimate / 2 ** 30:.1f} GiB | | | | |", flush=True)
-                continue
-            out = subprocess.run([sys.executable, "-c", CHILD.format(bench=bench, kind=kind, n=n)],
-                                 capture_output=True, text=True)
-            if out.returncode:
-                print(f"| {kind} | ~{n} | failed: {out.stderr.strip().splitlines()[-1]} | | | | |", flush=True)
-                continue
-            r = json.loads(out.stdout.strip().splitlines()[-1])
-            r["solve_mem"] = r["after"] - r["before"]
-            rows.append(r)
-            print(f"| {kind} | {r['vertices']} | {r['seconds']:.1f} | {r['before'] / 2 ** 30:.2f} GiB | "
-                  f"{r['after'] / 2 ** 30:.2f} GiB | {r['solve_mem'] / 2 ** 30:.2f} GiB | "
-                  f"{exact_memory_estimate(r['vertices']) / 2 ** 30:.2f} GiB |", flush=True)
-        if len(rows) >= 3:
-            n = [r["vertices"] for r in rows]
-            a, b = fit(n, [r["seconds"] for r in rows])
-            print(f"{kind}: seconds ~ {a:.3g} N^{b:.2f}", flush=True)
-            big = [r for r in rows if r["solve_mem"] > 2 ** 27]  # below 128 MiB the peak is the allocator's noise
-            if len(big) >= 2:
-                a, b = fit([r["vertices"] for r in big], [r["solve_mem"] for r in big])
-                print(f"{kind}: solve memory ~ {a:.3g} N^{b:.2f} bytes (rows over 128 MiB)", flush=True)
+    print("| mesh | vertices | prepare s | solve s | memory | estimate | libigl s | libigl memory | max rel. diff. |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|")
+    with tempfile.TemporaryDirectory() as tmp:
+        for kind in args.kinds:
+            rows = []
+            sizes = args.sizes if kind == "irregular" else sorted({10 * 4 ** icosphere_level(n) + 2 for n in args.sizes})
+            for n in sizes:
+                estimate = exact_memory_estimate(n)
+                if estimate > 0.8 * available_memory():
+                    print(f"| {kind} | ~{n} | skipped: estimate {gib(estimate)} | | | | | | |", flush=True)
+                    continue
+                path = f"{tmp}/{kind}{n}.npz"
+                made = child(MAKE.format(bench=bench, kind=kind, n=n, path=path))
+                if isinstance(made, str):
+                    print(f"| {kind} | ~{n} | mesh failed: {made} | | | | | | |", flush=True)
+                    continue
+                r = child(SOLVE.format(path=path, backend="vtp", out=f"{tmp}/vtp.npy"))
+                if isinstance(r, str):
+                    print(f"| {kind} | ~{n} | failed: {r} | | | | | | |", flush=True)
+                    continue
+                rows.append(r)
+                igl = child(SOLVE.format(path=path, backend="libigl", out=f"{tmp}/igl.npy")) \
+                    if r["vertices"] <= args.libigl_max else None
+                if isinstance(igl, dict):
+                    a, b = np.load(f"{tmp}/vtp.npy"), np.load(f"{tmp}/igl.npy")
+                    diff = float((np.abs(a - b) / np.maximum(b, 1e-300))[1:].max())
+                    ref = f"{igl['seconds']:.2f} | {gib(igl['memory'])} | {diff:.1e}"
+                else:
+                    ref = f"failed: {igl} | | " if isinstance(igl, str) else "not run | | "
+                print(f"| {kind} | {r['vertices']} | {r['prepare']:.2f} | {r['seconds']:.2f} | {gib(r['memory'])} | "
+                      f"{gib(exact_memory_estimate(r['vertices']))} | {ref} |", flush=True)
+                Path(path).unlink()
+            if len(rows) >= 3:
+                n = [r["vertices"] for r in rows]
+                a, b = fit(n, [r["seconds"] for r in rows])
+                print(f"{kind}: seconds ~ {a:.3g} N^{b:.2f}", flush=True)
+                a, b = fit(n, [r["memory"] for r in rows])
+                print(f"{kind}: memory ~ {a:.3g} N^{b:.2f} bytes, {max(r['memory'] / r['vertices'] for r in rows):.0f} "
+                      f"bytes a vertex at most", flush=True)
 
 
 if __name__ == "__main__":

@@ -23,12 +23,13 @@ __all__ = ["BACKENDS", "geodesic_solver", "exact_geodesic_distances", "sample_so
            "polyline_length", "edge_flip_paths", "exact_memory_estimate", "available_memory"]
 
 BACKENDS = ("vtp", "gdist", "libigl")
-# The vtp solver keeps every window of a source (48 bytes each) in one block that doubles as it grows. The
-# growth of the peak resident memory of one solve, 40k-320k vertices, regular and irregular meshes, was
-# 39-40 N^1.5 bytes (benchmarks/bench_exact_scaling.py, docs/benchmarks.md); MEMORY_MARGIN over it for
-# meshes that need more windows. Under RLIMIT_DATA the block's unused doubled capacity counts too: a
-# solve the estimate lets through may still end in bad_alloc, which run_isolated reports as out of memory.
-MEMORY_SCALE, MEMORY_POWER, MEMORY_MARGIN = 40.0, 1.5, 1.25
+# The vtp solver keeps the mesh's half-edge tables (~450 bytes a vertex) and only the wavefront of a source
+# (the windows waiting to cross a face, in chunks that the next ones reuse; tens of MiB at 1M vertices).
+# The peak resident memory of a solve over what the process held before building the solver, 10k-1M
+# vertices, regular and irregular meshes, grew linearly, at most ~520 bytes a vertex
+# (benchmarks/bench_exact_scaling.py, docs/benchmarks.md); MEMORY_MARGIN over it for meshes whose
+# wavefront is longer. (Before issue 58 every window was kept: ~40 N^1.5 bytes.)
+MEMORY_SCALE, MEMORY_POWER, MEMORY_MARGIN = 600.0, 1.0, 1.25
 
 
 def exact_memory_estimate(n_vertices: int) -> int:

@@ -123,6 +123,68 @@ def test_other_components_are_unreached_and_bad_input_is_refused():
         Surface(mesh.vertices, mesh.faces.astype(np.int32)).distances(np.array([-1]))
 
 
+def bumped(p: np.ndarray) -> np.ndarray:
+    """Unit-sphere points onto a smooth star-shaped surface, stretched (benchmarks/bench_exact_scaling.py's)."""
+    p = p / np.linalg.norm(p, axis=1, keepdims=True)
+    r = 1 + 0.25 * np.sin(3 * p[:, 0]) * np.cos(2 * p[:, 1]) + 0.15 * np.sin(5 * p[:, 2] + 1)
+    return p * r[:, None] * [1.6, 1.0, 0.7]
+
+
+def irregular(n: int) -> Mesh:
+    """The hull of n random points on the sphere, bumped: slivers and uneven valences."""
+    x = np.random.default_rng(n).standard_normal((n, 3))
+    m = trimesh.convex.convex_hull(x / np.linalg.norm(x, axis=1, keepdims=True))
+    return Mesh(bumped(m.vertices), m.faces)
+
+
+def regular(level: int) -> Mesh:
+    s = trimesh.creation.icosphere(level)
+    return Mesh(bumped(s.vertices), s.faces)
+
+
+def sliver_torus(around: int, tube: int = 10) -> Mesh:
+    """A torus of around x tube vertices, jittered: triangles ~60 times longer than wide at around = 2000,
+    convex vertices outside and saddles inside."""
+    u, v = np.meshgrid(np.arange(around) * 2 * np.pi / around, np.arange(tube) * 2 * np.pi / tube, indexing="ij")
+    v = v + np.random.default_rng(around).uniform(-0.2, 0.2, v.shape) * 2 * np.pi / tube
+    r = 1 + 0.3 * np.cos(v)
+    points = np.stack([r * np.cos(u), r * np.sin(u), 0.3 * np.sin(v)], -1).reshape(-1, 3)
+    i, j = np.meshgrid(np.arange(around), np.arange(tube), indexing="ij")
+    a, b = i * tube + j, (i + 1) % around * tube + j
+    c, d = i * tube + (j + 1) % tube, (i + 1) % around * tube + (j + 1) % tube
+    faces = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([c, b, d], -1).reshape(-1, 3)])
+    return Mesh(points, faces)
+
+
+def test_large_meshes_of_each_kind_equal_libigl():
+    """Only the wavefront is kept (issue 58): on 10k vertices of an irregular hull and a sliver torus, one
+    source each (more and larger in the slow test below)."""
+    assert_equal_to_libigl(irregular(10_000), [0])
+    torus = sliver_torus(1000)
+    edges = np.linalg.norm(torus.vertices[torus.faces] - torus.vertices[np.roll(torus.faces, 1, 1)], axis=-1)
+    assert (edges.max(1) / edges.min(1)).max() > 30  # slivers
+    assert_equal_to_libigl(torus, [5])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["irregular 20k", "irregular 40k", "regular 40k", "sliver torus 40k"])
+def test_large_meshes_equal_libigl(name):
+    mesh = {"irregular 20k": lambda: irregular(20_000), "irregular 40k": lambda: irregular(40_000),
+            "regular 40k": lambda: regular(6), "sliver torus 40k": lambda: sliver_torus(4000)}[name]()
+    assert_equal_to_libigl(mesh, np.random.default_rng(0).choice(mesh.n_vertices, 2, replace=False))
+
+
+def test_a_solve_fits_its_memory_estimate():
+    """40,962 vertices under RLIMIT_DATA set to the estimate (~29 MiB over what the child holds): the tables and
+    the wavefront fit (every window kept, the solver needed ~300 MiB here)."""
+    from geodata.geodesic import exact_memory_estimate
+    from geodata.parallel import run_isolated
+
+    mesh = regular(6)
+    d = run_isolated(lambda: geodesic_solver(mesh)(0), max_memory=exact_memory_estimate(mesh.n_vertices))
+    assert np.isfinite(d).all() and d.max() > 2
+
+
 def prepared(path: Path) -> Mesh:
     from geodata.prepare import PrepareConfig, prepare_geometry
     from geodata.stages.load import load_mesh_bytes
