@@ -1,5 +1,5 @@
-"""The GPU check: on a machine with CUDA, in about 11 minutes (an H100,
-2026-11-26), everything this project claims of GPUs.
+"""The GPU check: on a machine with CUDA, in about 9 minutes (an H200,
+2026-11-27), everything this project claims of GPUs.
 
     scripts/gpu_check.sh [OUT] [--store STORE]     (OUT default gpu-check/; the report is OUT/REPORT.md)
 
