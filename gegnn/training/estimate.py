@@ -24,7 +24,9 @@ PRESET_SPEEDUP = 4.5
 
 
 def readable_seconds(s: float) -> str:
-    """Seconds in the unit a person reads: 40 s, 12 min, 5.3 h, 4.1 days."""
+    """Seconds in the unit a person reads: 0.4 s, 40 s, 12 min, 5.3 h, 4.1 days."""
+    if s < 10:  # a short epoch on a GPU: never "0 s"
+        return f"{s:.1f} s"
     for unit, size, limit in (("s", 1, 120), ("min", 60, 7200), ("h", 3600, 172800)):
         if s < limit:
             return f"{s / size:.0f} {unit}" if unit == "s" else f"{s / size:.1f} {unit}"

@@ -132,7 +132,8 @@ def test_the_estimate_hints_at_a_preset_and_a_gpu_where_they_would_be_much_faste
     with caplog.at_level(logging.INFO, logger="test_presets"):
         clock._log_estimate(step_s=1.0, timed="steps 2-4")
     assert "estimate" in caplog.text and "hint" not in caplog.text
-    assert [readable_seconds(s) for s in (40, 600, 7200, 86400 * 3)] == ["40 s", "10.0 min", "2.0 h", "3.0 days"]
+    assert [readable_seconds(s) for s in (0.4, 40, 600, 7200, 86400 * 3)] == [
+        "0.4 s", "40 s", "10.0 min", "2.0 h", "3.0 days"]
 
 
 def test_eval_takes_a_shipped_models_name(tiny_store):
