@@ -7,16 +7,17 @@ runs (issue 49, item 5; issue 58).
 Meshes on a bumped, stretched sphere (benchmarks/ablation_heat_time.py): ``irregular``, the convex hull
 of N random points on the unit sphere (slivers, uneven valences); ``regular``, trimesh's icosphere at the
 level nearest N (2,562 x 4^k vertices). Each mesh is built once in a child process and written to a
-temporary folder; then each solver runs in a fresh child of its own (``ru_maxrss`` is a process's
-peak, and the mesh's construction must not set it): the child loads the mesh, notes its resident memory,
+temporary folder; then each solver runs in a fresh child of its own: the child loads the mesh, resets
+its peak resident memory (``/proc/self/clear_refs``, Linux), notes its resident memory,
 prepares the solver (``geodesic_solver``: the refusal check, then the mesh's half-edge tables), solves
-source 0 and reports the seconds of each step and its peak resident memory over what it held before the
+source 0 and reports the seconds of each step (and the solve's CPU seconds, which other work on the
+machine inflates less) and its peak resident memory over what it held before the
 solver (the tables, the wavefront and the distances: the memory a solve needs), with the estimate
 :func:`geodata.geodesic.exact_memory_estimate` beside it. libigl runs the same source on meshes up to
 ``--libigl-max`` vertices (it keeps every window: minutes and gigabytes beyond), and the largest
 relative difference of the two is reported. A size whose estimate exceeds the memory available here is
-skipped, not run. The fits are least squares of log(seconds) and log(memory) on log(N) over the rows of
-each kind.
+skipped, not run. The fits are least squares of log(CPU seconds) and log(memory) on log(N) over the
+rows of each kind.
 """
 from __future__ import annotations
 
@@ -49,28 +50,30 @@ np.savez({path!r}, vertices=bumped_stretched(m.vertices), faces=np.asarray(m.fac
 """
 
 SOLVE = r"""
-import json, resource, time
+import json, time
 import numpy as np
 from geodata.geodesic import geodesic_solver
 from geodata.mesh import Mesh
 
-def rss():
-    with open("/proc/self/statm") as f:
-        return int(f.read().split()[1]) * resource.getpagesize()
+def status(key):
+    with open("/proc/self/status") as f:
+        return next(int(line.split()[1]) * 1024 for line in f if line.startswith(key))
 
 data = np.load({path!r})
 mesh = Mesh(data["vertices"], data["faces"])
-start = rss()
+with open("/proc/self/clear_refs", "w") as f:
+    f.write("5")  # the peak resident memory (VmHWM) restarts from here: imports and loading left out
+start = status("VmRSS:")
 t0 = time.perf_counter()
 solve = geodesic_solver(mesh, {backend!r})
 prepare = time.perf_counter() - t0
-t0 = time.perf_counter()
+t0, c0 = time.perf_counter(), time.process_time()
 d = solve(0)
-seconds = time.perf_counter() - t0
-peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
+peak = status("VmHWM:")
 assert np.isfinite(d).all()
 np.save({out!r}, d)
-print(json.dumps(dict(vertices=mesh.n_vertices, prepare=prepare, seconds=seconds, memory=peak - start)))
+print(json.dumps(dict(vertices=mesh.n_vertices, prepare=prepare, seconds=seconds, cpu=cpu, memory=peak - start)))
 """
 
 
@@ -95,7 +98,7 @@ def child(code: str) -> dict | str:
 
 
 def gib(b: float) -> str:
-    return f"{b / 2 ** 30:.2f} GiB"
+    return f"{b / 2 ** 30:.2f} GiB" if b >= 2 ** 30 else f"{b / 2 ** 20:.0f} MiB"
 
 
 def main():
@@ -108,7 +111,7 @@ def main():
     args = ap.parse_args()
     bench = str(Path(__file__).resolve().parent)
     print(f"CPU: {cpu_description()}; available memory {available_memory() / 2 ** 30:.1f} GiB")
-    print("| mesh | vertices | prepare s | solve s | memory | estimate | libigl s | libigl memory | max rel. diff. |")
+    print("| mesh | vertices | prepare s | solve s (CPU s) | memory | estimate | libigl s | libigl memory | max rel. diff. |")
     print("|---|---:|---:|---:|---:|---:|---:|---:|---:|")
     with tempfile.TemporaryDirectory() as tmp:
         for kind in args.kinds:
@@ -137,13 +140,13 @@ def main():
                     ref = f"{igl['seconds']:.2f} | {gib(igl['memory'])} | {diff:.1e}"
                 else:
                     ref = f"failed: {igl} | | " if isinstance(igl, str) else "not run | | "
-                print(f"| {kind} | {r['vertices']} | {r['prepare']:.2f} | {r['seconds']:.2f} | {gib(r['memory'])} | "
+                print(f"| {kind} | {r['vertices']} | {r['prepare']:.2f} | {r['seconds']:.2f} ({r['cpu']:.2f}) | {gib(r['memory'])} | "
                       f"{gib(exact_memory_estimate(r['vertices']))} | {ref} |", flush=True)
                 Path(path).unlink()
             if len(rows) >= 3:
                 n = [r["vertices"] for r in rows]
-                a, b = fit(n, [r["seconds"] for r in rows])
-                print(f"{kind}: seconds ~ {a:.3g} N^{b:.2f}", flush=True)
+                a, b = fit(n, [r["cpu"] for r in rows])
+                print(f"{kind}: CPU seconds ~ {a:.3g} N^{b:.2f}", flush=True)
                 a, b = fit(n, [r["memory"] for r in rows])
                 print(f"{kind}: memory ~ {a:.3g} N^{b:.2f} bytes, {max(r['memory'] / r['vertices'] for r in rows):.0f} "
                       f"bytes a vertex at most", flush=True)

@@ -23,19 +23,20 @@ __all__ = ["BACKENDS", "geodesic_solver", "exact_geodesic_distances", "sample_so
            "polyline_length", "edge_flip_paths", "exact_memory_estimate", "available_memory"]
 
 BACKENDS = ("vtp", "gdist", "libigl")
-# The vtp solver keeps the mesh's half-edge tables (~450 bytes a vertex) and only the wavefront of a source
-# (the windows waiting to cross a face, in chunks that the next ones reuse; tens of MiB at 1M vertices).
-# The peak resident memory of a solve over what the process held before building the solver, 10k-1M
-# vertices, regular and irregular meshes, grew linearly, at most ~520 bytes a vertex
-# (benchmarks/bench_exact_scaling.py, docs/benchmarks.md); MEMORY_MARGIN over it for meshes whose
-# wavefront is longer. (Before issue 58 every window was kept: ~40 N^1.5 bytes.)
-MEMORY_SCALE, MEMORY_POWER, MEMORY_MARGIN = 600.0, 1.0, 1.25
+# The vtp solver keeps the mesh's half-edge tables (~430 bytes a vertex) and only the wavefront of a source
+# (the windows waiting to cross a face, in chunks that the next ones reuse: ~50 MiB at 1M vertices).
+# The peak resident memory of building the solver and one solve, over what the process held before,
+# 10k-1M vertices, regular and irregular meshes, grew linearly: 9 MiB at 10k, 455 MiB at 1M, under
+# MEMORY_BASE + MEMORY_SCALE N^MEMORY_POWER bytes (benchmarks/bench_exact_scaling.py, docs/benchmarks.md);
+# MEMORY_MARGIN over it for meshes whose wavefront is longer. (Before issue 58 every window was kept:
+# ~40 N^1.5 bytes, 47 GiB at 1M.)
+MEMORY_BASE, MEMORY_SCALE, MEMORY_POWER, MEMORY_MARGIN = 8 << 20, 500.0, 1.0, 1.25
 
 
 def exact_memory_estimate(n_vertices: int) -> int:
     """Bytes the vtp solver is expected to allocate for one source on a mesh of ``n_vertices`` (with
     MEMORY_MARGIN over the measured fit; meshes of other shapes and qualities vary around it)."""
-    return int(MEMORY_MARGIN * MEMORY_SCALE * float(n_vertices) ** MEMORY_POWER)
+    return int(MEMORY_MARGIN * (MEMORY_BASE + MEMORY_SCALE * float(n_vertices) ** MEMORY_POWER))
 
 
 def available_memory() -> int:

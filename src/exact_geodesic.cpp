@@ -59,7 +59,7 @@ namespace {
 constexpr double INF = std::numeric_limits<double>::infinity();
 constexpr double MARGIN = 1e-12;      // relative: prune only what is worse than a real path by more
 constexpr double HAIR = 1e-11;   // relative to a window's distance: closer to a vertex, it relays (rule 4)
-constexpr double BUCKET = 0.05;  // bucket width / mean edge length  // bucket width / mean edge length: 0.02-0.05 fastest, 1.0 is 15% slower
+constexpr double BUCKET = 0.05;  // bucket width / mean edge length (0.02-0.3: within 5% at 160k vertices)
 
 struct Window {
     double b0, b1, sx, sy, sigma;

@@ -27,21 +27,23 @@ def vtp(mesh, source):
     return geodesic_solver(mesh, "vtp")(source)
 
 
-def assert_equal_to_libigl(mesh, sources):
+def assert_equal_to_libigl(mesh, sources, references=("libigl", "gdist")):
     """Equal to 1e-9 relative within the source's part (other parts: inf here, 0 from libigl).
 
     libigl and tvb-gdist run the same Kirsanov code. On a few vertices of some sources it differs from
     itself by up to 1e-8 relative, and on some meshes it is longer than the true distance (by 1.5e-4 on a
-    subdivided CAD part). Where vtp is shorter than both, potpourri3d's edge-flip geodesic (an
-    independent code) must find a surface path as short: then vtp's value is a real path's length.
-    Never longer than the shorter reference: no shortest path is missed.
+    subdivided CAD part, 2.3e-6 on a 40k hull), or leaves a vertex unreached (libigl/libigl#1013: inf from
+    gdist, 0 from libigl; counted as no answer). Where vtp is shorter than every answer, potpourri3d's
+    edge-flip geodesic (an independent code) must find a surface path as short: then vtp's value is a
+    real path's length. Never longer than the shorter reference: no shortest path is missed.
     """
     labels = vertex_components(mesh)
     for s in sources:
         part = labels == labels[s]
         d = vtp(mesh, s)
         assert np.isinf(d[~part]).all()
-        best = np.minimum(libigl(mesh, s), geodesic_solver(mesh, "gdist")(s))
+        answers = [geodesic_solver(mesh, name)(s) for name in references]
+        best = np.min([np.where((a > 0) | (np.arange(len(a)) == s), a, np.inf) for a in answers], axis=0)
         shorter = part & (d < best * (1 - RTOL))
         assert (d[shorter] >= flipout_lengths(mesh, s, np.flatnonzero(shorter)) * (1 - RTOL)).all()
         keep = part & ~shorter
@@ -168,10 +170,12 @@ def test_large_meshes_of_each_kind_equal_libigl():
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["irregular 20k", "irregular 40k", "regular 40k", "sliver torus 40k"])
-def test_large_meshes_equal_libigl(name):
+def test_large_meshes_equal_gdist(name):
+    """Against tvb-gdist alone: the same Kirsanov code as libigl, and ~15x faster at 40k here (libigl: ~5 min
+    a source on the 40k hull)."""
     mesh = {"irregular 20k": lambda: irregular(20_000), "irregular 40k": lambda: irregular(40_000),
             "regular 40k": lambda: regular(6), "sliver torus 40k": lambda: sliver_torus(4000)}[name]()
-    assert_equal_to_libigl(mesh, np.random.default_rng(0).choice(mesh.n_vertices, 2, replace=False))
+    assert_equal_to_libigl(mesh, np.random.default_rng(0).choice(mesh.n_vertices, 2, replace=False), ("gdist",))
 
 
 def test_a_solve_fits_its_memory_estimate():
