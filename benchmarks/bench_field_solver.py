@@ -4,6 +4,7 @@ and the heat method: accuracy and time per field, on one core (issue 55, item 1)
     python benchmarks/bench_field_solver.py [--meshes max homer camel ...] [--levels 0 1] [--sources 8]
         [--sweep] [--ablation]
     python benchmarks/bench_field_solver.py --lower-bound [MESH ...]
+    python benchmarks/bench_field_solver.py --cloud-lower-bound [MESH ...]
     python benchmarks/bench_field_solver.py --raw
 
 Per mesh, a base of ~3-7k vertices and its midpoint subdivisions (``trimesh.remesh.subdivide`` keeps the
@@ -22,7 +23,7 @@ Meshes: twelve real ones from ../shared/meshes/dev (``max``: decimated-max, ``ho
 at a random interior point (uneven valences, thin triangles), ``slivers``: the same with the split point
 near an edge (needle triangles, angles down to ~1 degree).
 
---sweep: decimated-max at 5k, 20k, 80k, 320k vertices (2 sources; the heat method up to 80k).
+--sweep: decimated-max at 5k, 20k, 80k, 320k, 1.35M vertices (2 sources; the heat method and the exact solver up to 80k).
 --ablation: the solver's design choices on the real meshes (probe point, saddle gates, queue, bucket width).
 --raw: every mesh of ../shared/meshes (both splits) under 10k vertices that is a closed manifold as loaded
 (the exact solver's condition), unremeshed: CAD parts with needle triangles, furniture; 3 sources each.
@@ -30,11 +31,17 @@ near an edge (needle triangles, angles down to ~1 degree).
 over the first K of 256 farthest-point landmarks (chosen on the heat method's fields in rounds of 16, as
 today's models do; "own landmarks": chosen on the new fields), against exact distances from 20 sources to
 every vertex, with each kind of field at the same landmarks.
+--cloud-lower-bound: the same bound for the point-cloud model's fields (issue 55, item 4), the mesh's vertices
+taken as a cloud, 256 landmarks chosen along its neighbour graph as the points model does: its own fields (the
+point-cloud heat method), virtual sources on the cloud's local Delaunay triangles (every point's, as the cloud
+heat method builds them; an edge's two faces kept that the most points' triangulations agree on, the rest set
+aside by ``manifold_copy``), and the mesh's exact fields (the bound a perfect cloud field would give).
 """
 from __future__ import annotations
 
 import argparse
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -161,7 +168,7 @@ def sweep(repeat):
     sources = np.random.default_rng(0).choice(len(v0), 2, replace=False)
     exact = geodesic_solver(Mesh(v0, f0))
     truth = np.stack([exact(int(s)) for s in sources])
-    for level in range(4):
+    for level in range(5):  # 5k, 21k, 84k, 337k, 1.35M vertices
         v, f = subdivide(v0, f0, level)
         print(row("max", level, v, f, sources, truth, repeat if level < 3 else 1, heat=level <= 2,
                   exact_time=level <= 2), flush=True)
@@ -256,6 +263,41 @@ def lower_bound_table(names, ks=(16, 32, 64, 128, 256), n_sources=20):
             print(f"| {name} | {label} | " + " | ".join(f"{100 * e:.2f}%" for e in cells) + " |", flush=True)
 
 
+def cloud_lower_bound_table(names, ks=(64, 128, 256), n_sources=20):
+    from gegnn.fields.cloud_heat import local_triangulations
+    from gegnn.fields.landmarks import _vsp_field, graph_farthest_points
+    from gegnn.fields.pointcloud import cloud_graph, cloud_landmark_solver, surface_neighbors
+
+    print(f"\ncloud fields: lower bound of the first K of 256 landmarks, mean relative error over {n_sources} "
+          "sources x every point; seconds for the 256 fields")
+    print("| mesh | fields | " + " | ".join(f"K = {k}" for k in ks) + " | s |\n|---|---|" + "---:|" * (len(ks) + 1))
+    for name in names:
+        v, f = base_mesh(name)
+        exact = geodesic_solver(Mesh(v, f))
+        rng = np.random.default_rng(0)
+        sources = rng.choice(len(v), n_sources, replace=False)
+        truth = np.stack([exact(int(s)) for s in sources])
+        landmarks = graph_farthest_points(v, cloud_graph(v).edges, max(ks), int(rng.integers(len(v))))
+        t = time.perf_counter()
+        rows = {"point-cloud heat method (the points model's)": cloud_landmark_solver(
+            v, np.zeros(len(v), dtype=np.int64))(max(ks), 0).distances}
+        seconds = [time.perf_counter() - t]
+        t = time.perf_counter()
+        triangles = local_triangulations(v, surface_neighbors(v))[1]
+        _, first, agree = np.unique(np.sort(triangles, axis=1), axis=0, return_index=True, return_counts=True)
+        soup = triangles[first[np.argsort(-agree, kind="stable")]]  # most agreed first: kept on their edges
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # the soup's non-manifold edges, expected
+            rows["virtual sources on the local triangles"] = _vsp_field(v, soup, 0.5, max(ks))(landmarks)
+        seconds.append(time.perf_counter() - t)
+        rows["exact (the mesh's)"] = np.stack([exact(int(l)) for l in landmarks], axis=1)
+        seconds.append(float("nan"))
+        for (label, fields), sec in zip(rows.items(), seconds):
+            cells = lower_bound_errors(np.asarray(fields, dtype=np.float64), truth, sources, ks)
+            print(f"| {name} | {label} | " + " | ".join(f"{100 * e:.2f}%" for e in cells) + f" | {sec:.2f} |",
+                  flush=True)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--meshes", nargs="+", default=[*REAL, "irregular", "slivers"])
@@ -267,6 +309,8 @@ def main():
     ap.add_argument("--raw", action="store_true")
     ap.add_argument("--lower-bound", nargs="*", metavar="MESH", help="issue 55's LB table on these meshes "
                     "(default: max homer camel)")
+    ap.add_argument("--cloud-lower-bound", nargs="*", metavar="MESH", help="the same for the point-cloud "
+                    "model's fields (default: max homer camel)")
     args = ap.parse_args()
     torch.set_num_threads(1)  # the heat method's solves run on torch's thread count: one core for all three
     print(f"CPU: {cpu_description()}")
@@ -275,6 +319,9 @@ def main():
         return
     if args.lower_bound is not None:
         lower_bound_table(args.lower_bound or ["max", "homer", "camel"])
+        return
+    if args.cloud_lower_bound is not None:
+        cloud_lower_bound_table(args.cloud_lower_bound or ["max", "homer", "camel"])
         return
     print(f"{args.sources} sources a mesh (seed 0); errors over sources x base vertices; times: the least CPU "
           f"time of {args.repeat} calls, one thread")
