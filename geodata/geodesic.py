@@ -26,10 +26,10 @@ BACKENDS = ("vtp", "gdist", "libigl")
 # The vtp solver keeps the mesh's half-edge tables (~430 bytes a vertex) and only the wavefront of a source
 # (the windows waiting to cross a face, in chunks that the next ones reuse: ~50 MiB at 1M vertices).
 # The peak resident memory of building the solver and one solve, over what the process held before,
-# 10k-1M vertices, regular and irregular meshes, grew linearly: 9 MiB at 10k, 455 MiB at 1M, under
-# MEMORY_BASE + MEMORY_SCALE N^MEMORY_POWER bytes (benchmarks/bench_exact_scaling.py, docs/benchmarks.md);
-# MEMORY_MARGIN over it for meshes whose wavefront is longer. (Before issue 58 every window was kept:
-# ~40 N^1.5 bytes, 47 GiB at 1M.)
+# 5k-1M vertices, regular and irregular meshes, grew linearly: 9 MiB at 10k, 162 MiB at 320k, 458 MiB at
+# 1M, within 1% of MEMORY_BASE + MEMORY_SCALE N^MEMORY_POWER bytes or under it (benchmarks/
+# bench_exact_scaling.py, docs/benchmarks.md); MEMORY_MARGIN over it for meshes whose wavefront is
+# longer. (Before issue 58 every window was kept: ~40 N^1.5 bytes, 47 GiB at 1M.)
 MEMORY_BASE, MEMORY_SCALE, MEMORY_POWER, MEMORY_MARGIN = 8 << 20, 500.0, 1.0, 1.25
 
 
