@@ -97,6 +97,12 @@ CLAIMS = [
     ("train.step.paper256.cpu", "gegnn/training/estimate.py", r"one thread; ([\d.]+ s) against [\d.]+ s on a"),
     ("mre.category.shipped", "docs/own-data.md", r"\| shipped `landmark` \| ([\d.]+%) \|"),
     ("mre.category.finetuned", "docs/own-data.md", r"\| fine-tuned from it, one epoch on the other shapes \| \*\*([\d.]+%)\*\* \|"),
+    ("mre.category.shipped.precise", "docs/own-data.md", r"\| shipped `landmark`, no fine-tune \| ([\d.]+%) \|"),
+    ("mre.category.finetuned.ft-e1-lr-0.0-decoder-warmup-1000", "docs/own-data.md",
+     r"\| `--lr 0 --decoder-warmup 1000` \(the decoder alone[^|]*\| ([\d.]+%) \|"),
+    ("mre.category.finetuned.ft-e2-lr-2e-05-decoder-warmup-1000", "docs/own-data.md",
+     r"\| `--lr 2e-5 --decoder-warmup 1000 --epochs 2` \| ([\d.]+%) \|"),
+    ("mre.category.finetuned.ft-e3-lr-3e-05", "docs/own-data.md", r"\| `--lr 3e-5 --epochs 3` \| ([\d.]+%) \|"),
     # the viewer's page
     ("page.landmark-v2.5k", "docs/queries.md", r"K = 256\): \*\*([\d.]+ MiB)\*\* at 4,762 vertices"),
     ("page.landmark-v2.50k", "docs/queries.md", r"at 4,762 vertices, ([\d.]+ MiB) at\s+50k"),
