@@ -34,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from geodata.mesh import Mesh, label_groups, vertex_components
+from geodata.mesh import Mesh, label_groups, unique_edges, vertex_components
 
 from .heat import HeatDistance
 
@@ -193,9 +193,8 @@ def _along_edges(fields: np.ndarray, vertices: np.ndarray, faces: np.ndarray) ->
     rows = todo.any(axis=1)
     if not rows.any():
         return fields
-    edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    edges = np.unique(np.sort(edges[rows[edges].any(axis=1)], axis=1), axis=0)
-    a, b = edges.T
+    edges = unique_edges(faces)
+    a, b = edges[rows[edges].any(axis=1)].T
     w = np.linalg.norm(vertices[a] - vertices[b], axis=1)[:, None]
     for _ in range(len(fields)):
         step = fields.copy()
