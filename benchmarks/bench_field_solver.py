@@ -238,6 +238,16 @@ def lower_bound_errors(fields: np.ndarray, truth: np.ndarray, sources, ks) -> li
     return out
 
 
+def exact_truth(name: str, n_sources: int):
+    """A bound table's mesh and its truth: vertices, faces, the exact solver, the generator (seed 0) after the
+    sources were drawn (the landmarks' first pick comes next), the sources and their exact fields (S, N)."""
+    v, f = base_mesh(name)
+    exact = geodesic_solver(Mesh(v, f))
+    rng = np.random.default_rng(0)
+    sources = rng.choice(len(v), n_sources, replace=False)
+    return v, f, exact, rng, sources, np.stack([exact(int(s)) for s in sources])
+
+
 def lower_bound_table(names, ks=(16, 32, 64, 128, 256), n_sources=20):
     from gegnn.fields.landmarks import batched_farthest_point_fields
 
@@ -245,11 +255,7 @@ def lower_bound_table(names, ks=(16, 32, 64, 128, 256), n_sources=20):
           "every vertex")
     print("| mesh | fields | " + " | ".join(f"K = {k}" for k in ks) + " |\n|---|---|" + "---:|" * len(ks))
     for name in names:
-        v, f = base_mesh(name)
-        exact = geodesic_solver(Mesh(v, f))
-        rng = np.random.default_rng(0)
-        sources = rng.choice(len(v), n_sources, replace=False)
-        truth = np.stack([exact(int(s)) for s in sources])
+        v, f, exact, rng, sources, truth = exact_truth(name, n_sources)
         heat, ours = HeatDistance(v, f), VirtualSources(v, f)
         first = int(rng.integers(len(v)))
         landmarks, by_heat = batched_farthest_point_fields(heat.distances, v, max(ks), first)
@@ -272,11 +278,7 @@ def cloud_lower_bound_table(names, ks=(64, 128, 256), n_sources=20):
           "sources x every point; seconds for the 256 fields")
     print("| mesh | fields | " + " | ".join(f"K = {k}" for k in ks) + " | s |\n|---|---|" + "---:|" * (len(ks) + 1))
     for name in names:
-        v, f = base_mesh(name)
-        exact = geodesic_solver(Mesh(v, f))
-        rng = np.random.default_rng(0)
-        sources = rng.choice(len(v), n_sources, replace=False)
-        truth = np.stack([exact(int(s)) for s in sources])
+        v, f, exact, rng, sources, truth = exact_truth(name, n_sources)
         landmarks = graph_farthest_points(v, cloud_graph(v).edges, max(ks), int(rng.integers(len(v))))
         t = time.perf_counter()
         rows = {"point-cloud heat method (the points model's)": cloud_landmark_solver(
