@@ -32,10 +32,11 @@ over the first K of 256 farthest-point landmarks (chosen on the heat method's fi
 today's models do; "own landmarks": chosen on the new fields), against exact distances from 20 sources to
 every vertex, with each kind of field at the same landmarks.
 --cloud-lower-bound: the same bound for the point-cloud model's fields (issue 55, item 4), the mesh's vertices
-taken as a cloud, 256 landmarks chosen along its neighbour graph as the points model does: its own fields (the
-point-cloud heat method), virtual sources on the cloud's local Delaunay triangles (every point's, as the cloud
-heat method builds them; an edge's two faces kept that the most points' triangulations agree on, the rest set
-aside by ``manifold_copy``), and the mesh's exact fields (the bound a perfect cloud field would give).
+taken as a cloud, 256 landmarks chosen along its neighbour graph as the points model does: points-v2's fields
+(the point-cloud heat method), virtual sources on the tufted cover of the cloud's local Delaunay triangles
+(points-v3's, :mod:`gegnn.fields.cloud_vsp`), the same solver on a manifold copy of those triangles (an edge's
+two faces kept that the most points' triangulations agree on, the rest set aside by ``manifold_copy``: holes),
+and the mesh's exact fields (the bound a perfect cloud field would give).
 """
 from __future__ import annotations
 
@@ -271,6 +272,7 @@ def lower_bound_table(names, ks=(16, 32, 64, 128, 256), n_sources=20):
 
 def cloud_lower_bound_table(names, ks=(64, 128, 256), n_sources=20):
     from gegnn.fields.cloud_heat import local_triangulations
+    from gegnn.fields.cloud_vsp import CloudVirtualSources
     from gegnn.fields.landmarks import _vsp_field, graph_farthest_points
     from gegnn.fields.pointcloud import cloud_graph, cloud_landmark_solver, surface_neighbors
 
@@ -281,16 +283,21 @@ def cloud_lower_bound_table(names, ks=(64, 128, 256), n_sources=20):
         v, f, exact, rng, sources, truth = exact_truth(name, n_sources)
         landmarks = graph_farthest_points(v, cloud_graph(v).edges, max(ks), int(rng.integers(len(v))))
         t = time.perf_counter()
-        rows = {"point-cloud heat method (the points model's)": cloud_landmark_solver(
+        rows = {"point-cloud heat method (points-v2's)": cloud_landmark_solver(
             v, np.zeros(len(v), dtype=np.int64))(max(ks), 0).distances}
         seconds = [time.perf_counter() - t]
         t = time.perf_counter()
         triangles = local_triangulations(v, surface_neighbors(v))[1]
+        rows["virtual sources on the local triangles' tufted cover (points-v3's)"] = CloudVirtualSources(
+            v, triangles).distances(landmarks)
+        seconds.append(time.perf_counter() - t)
+        t = time.perf_counter()
         _, first, agree = np.unique(np.sort(triangles, axis=1), axis=0, return_index=True, return_counts=True)
         soup = triangles[first[np.argsort(-agree, kind="stable")]]  # most agreed first: kept on their edges
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # the soup's non-manifold edges, expected
-            rows["virtual sources on the local triangles"] = _vsp_field(v, soup, 0.5, max(ks))(landmarks)
+            rows["virtual sources on a manifold copy of the local triangles"] = _vsp_field(v, soup, 0.5, max(ks))(
+                landmarks)
         seconds.append(time.perf_counter() - t)
         rows["exact (the mesh's)"] = np.stack([exact(int(l)) for l in landmarks], axis=1)
         seconds.append(float("nan"))

@@ -251,7 +251,7 @@ class GeGnn(nn.Module):
         p = (distinct - center) / scale
         g = cloud_graph(p, self.config.points, normals)
         spec = FieldSpec.of(self.config)
-        solver = None if spec is None else cloud_landmark_solver(g.points, g.part, normals=normals)
+        solver = None if spec is None else cloud_landmark_solver(g.points, g.part, normals=normals, solver=spec.solver)
 
         def hierarchy():
             return self.hierarchy(self.mesh_graph(g.points, g.normals, g.edges)).to(device)

@@ -44,18 +44,27 @@ class ApproximateGeodesicSolver:
         vertices: (N, 3) float coordinates, all finite.
         faces: (M, 3) integer vertex indices in [0, N); no edge in three or more faces, no vertex whose
             faces form two or more fans.
+        twins: (3M,) optional: the half-edge 3 g + j glued to each half-edge 3 f + k (from corner k to
+            k + 1), -1 for none, each glued back; for a surface whose edges its two vertices do not tell
+            (a tufted cover: :mod:`gegnn.fields.cloud_vsp`). Pinched vertices are then taken: a path bends
+            there at the vertex's distance.
+        excess: (N,) optional: each vertex's angle excess for the gates, where the faces' corners do not
+            give it (default: their angle sum less 2 pi; with twins, half the sum, a cover's corners coming
+            twice; a cloud's overlapping triangulations need their own).
 
     Raises:
         ValueError: naming what is wrong with the mesh (shapes, non-finite coordinates, indices out of
-            range, non-manifold edges or vertices).
+            range, non-manifold edges or vertices, twins not glued back or joining other vertices).
     """
 
-    def __init__(self, vertices, faces):
+    def __init__(self, vertices, faces, twins=None, excess=None):
         from geodata._virtual_source_geodesic import VirtualSources
 
         vertices, faces = _checked_mesh(vertices, faces)
         self.n_vertices = len(vertices)
-        self._native = VirtualSources(vertices, faces)  # counts non-manifold edges and vertices (ValueError)
+        twins = None if twins is None else np.ascontiguousarray(twins, dtype=np.int64)
+        excess = None if excess is None else np.ascontiguousarray(excess, dtype=np.float64)
+        self._native = VirtualSources(vertices, faces, twins, excess)  # counts non-manifold edges and vertices
 
     def distances(self, sources, threads: int | None = None) -> np.ndarray:
         """Distances from each source vertex to every vertex.

@@ -46,6 +46,7 @@
 // a vertex: ~0.5 kB a vertex in all.
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>
+#include <nanobind/stl/optional.h>
 #include <nanobind/stl/string.h>
 
 #include <algorithm>
@@ -204,7 +205,13 @@ struct Workspace {
 
 class VirtualSources {
 public:
-    VirtualSources(const double* V, int64_t n, const int64_t* F, int64_t m) : n_(n), m_(m) {
+    // twins (3 M, optional): the half-edge glued to each half-edge 3 f + k (-1: none), for surfaces whose
+    // edges are not told by their two vertices (a tufted cover: its angle excess is half its corners'
+    // sum less 2 pi, each corner counted twice); excess (N, optional): each vertex's angle excess where
+    // neither gives it (a cloud's overlapping local triangulations).
+    VirtualSources(const double* V, int64_t n, const int64_t* F, int64_t m, const int64_t* twins = nullptr,
+                   const double* excess = nullptr)
+        : n_(n), m_(m) {
         if (n >= (int64_t(1) << 31) || m >= (int64_t(1) << 28))  // a face's index is packed in 29 bits
             throw std::invalid_argument("more than 2^31 vertices or 2^28 faces");
         for (int64_t i = 0; i < 3 * n; ++i)
@@ -215,6 +222,8 @@ public:
         // first use them: neighbours sit close in memory, whatever the caller's order (84k vertices: 73 ms
         // a field in trimesh's order of a subdivided mesh, 125 ms shuffled, 47 ms either way sorted)
         const std::vector<int> faces = morton_order(V, n, F, m);
+        std::vector<int> face_of_old(m);
+        for (int64_t i = 0; i < m; ++i) face_of_old[faces[i]] = static_cast<int>(i);
         new_of_old_.assign(n, -1);
         old_of_new_.reserve(n);
         F_.resize(3 * m);
@@ -230,8 +239,33 @@ public:
         for (int64_t i = 0; i < n; ++i)
             for (int k = 0; k < 3; ++k) positions[3 * i + k] = V[3 * old_of_new_[i] + k];
         build_frames(positions.data());
-        build_unfoldings();
+        if (excess)
+            for (int64_t i = 0; i < n; ++i) excess_[i] = excess[old_of_new_[i]];
+        else if (twins)  // a cover's corners come twice, a front and a back
+            for (int64_t i = 0; i < n; ++i) excess_[i] = (excess_[i] + 2.0 * M_PI) / 2.0 - 2.0 * M_PI;
+        if (twins) {
+            std::vector<int> glued(3 * m);
+            for (int64_t h = 0; h < 3 * m; ++h) {
+                const int64_t o = twins[h];
+                if (o < -1 || o >= 3 * m || o == h || (o >= 0 && twins[o] != h))
+                    throw std::invalid_argument("twins: each half-edge glued to one other that is glued back");
+                glued[3 * face_of_old[h / 3] + h % 3] = o < 0 ? -1 : 3 * face_of_old[o / 3] + static_cast<int>(o % 3);
+            }
+            across_.assign(3 * m_, Across{});
+            for (int h = 0; h < 3 * m_; ++h) {
+                const int o = glued[h];
+                if (o < 0) continue;
+                const int a = F_[h], b = F_[h % 3 == 2 ? h - 2 : h + 1];
+                const int c = F_[o], e = F_[o % 3 == 2 ? o - 2 : o + 1];
+                if (std::min(a, b) != std::min(c, e) || std::max(a, b) != std::max(c, e))
+                    throw std::invalid_argument("twins: a half-edge glued to one of two other vertices");
+                link(h, o);
+            }
+        } else {
+            build_unfoldings();
+        }
         build_vertex_faces();
+        if (twins) return;  // a cover's vertices may join several fans: paths bend there (d of the vertex)
         if (const int64_t pinched = count_pinched())
             throw std::invalid_argument(std::to_string(pinched) +
                                         " non-manifold vertices (their faces form two or more fans)");
@@ -515,6 +549,8 @@ private:
 using Vertices = nb::ndarray<const double, nb::shape<-1, 3>, nb::c_contig, nb::device::cpu>;
 using Faces = nb::ndarray<const int64_t, nb::shape<-1, 3>, nb::c_contig, nb::device::cpu>;
 using Sources = nb::ndarray<const int64_t, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
+using Twins = nb::ndarray<const int64_t, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
+using Excess = nb::ndarray<const double, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
 using Out = nb::ndarray<nb::numpy, double, nb::ndim<2>>;
 
 // The fields of all sources (one row each), over `threads` threads taking sources in turn; each
@@ -568,9 +604,18 @@ NB_MODULE(_virtual_source_geodesic, m) {
     nb::class_<VirtualSources>(m, "VirtualSources")
         .def(
             "__init__",
-            [](VirtualSources* self, Vertices V, Faces F) { new (self) VirtualSources(V.data(), V.shape(0), F.data(), F.shape(0)); },
-            nb::arg("vertices"), nb::arg("faces"),
-            "Precompute a mesh: vertices (N, 3) float64 and faces (M, 3) int64, both C-contiguous.")
+            [](VirtualSources* self, Vertices V, Faces F, std::optional<Twins> twins, std::optional<Excess> excess) {
+                if (twins && twins->shape(0) != 3 * F.shape(0)) throw std::invalid_argument("twins: 3 M half-edges");
+                if (excess && excess->shape(0) != V.shape(0)) throw std::invalid_argument("excess: one a vertex");
+                new (self) VirtualSources(V.data(), V.shape(0), F.data(), F.shape(0), twins ? twins->data() : nullptr,
+                                          excess ? excess->data() : nullptr);
+            },
+            nb::arg("vertices"), nb::arg("faces"), nb::arg("twins") = nb::none(), nb::arg("excess") = nb::none(),
+            "Precompute a mesh: vertices (N, 3) float64 and faces (M, 3) int64, both C-contiguous; twins\n"
+            "(3 M,) int64: the half-edge 3 g + j glued to each half-edge 3 f + k (-1: none), where edges are not\n"
+            "paired by their vertices (a tufted cover; pinched vertices are then taken); excess (N,) float64:\n"
+            "each vertex's angle excess for the gates, where the corner angles do not give it (default: half\n"
+            "their sum less 2 pi with twins, the corners of a cover counted twice).")
         .def("n_vertices", &VirtualSources::n_vertices)
         .def(
             "distances",

@@ -61,8 +61,9 @@ class FieldSpec:
     """Which fields: ``"landmark"`` (K landmark distance fields per component) or ``"spectral"`` (m spectral
     modes and the tail scale), and K or m; ``cloud``: the k of a point-cloud model's neighbour graph, whose
     landmark fields come from the points alone (:mod:`gegnn.fields.pointcloud`), 0 for a mesh model;
-    ``solver``: a mesh's landmark fields by the heat method (``"heat"``) or by virtual source propagation
-    (``"vsp"``, :func:`gegnn.fields.landmarks.landmark_solver`)."""
+    ``solver``: the landmark fields by the heat method (``"heat"``) or by virtual source propagation
+    (``"vsp"``: a mesh's by :func:`gegnn.fields.landmarks.landmark_solver`, a cloud's on its local triangles'
+    tufted cover, :mod:`gegnn.fields.cloud_vsp`)."""
 
     kind: str
     size: int
@@ -73,7 +74,7 @@ class FieldSpec:
     def of(cls, config) -> "FieldSpec | None":
         """The fields a :class:`gegnn.GeGnnConfig` asks for (None for the paper's model)."""
         if config.landmarks:
-            return cls("landmark", config.landmarks, config.points, "heat" if config.points else config.landmark_fields)
+            return cls("landmark", config.landmarks, config.points, config.landmark_fields)
         return cls("spectral", config.spectral) if config.spectral else None
 
     @property
@@ -99,10 +100,12 @@ class FieldSpec:
         # "-surface2": point-cloud fields on surface_neighbors with twice-fitted cone normals (since
         # 2026-11-23, the second cloud release); "-rounds16": a mesh's landmarks chosen 16 a round (since
         # 2026-11-26, gegnn.fields.landmarks.FPS_BATCH): not those of older caches
+        # "-vsp": fields by virtual source propagation (meshes since 2026-11-27, clouds since 2026-11-28); the
+        # heat method's names are unchanged
+        vsp = "-vsp" if self.solver == "vsp" else ""
         if self.cloud:
-            return f"k{self.size}-cloud{self.cloud}-surface2"
-        # "-vsp": fields by virtual source propagation (since 2026-11-27); the heat method's name is unchanged
-        return f"k{self.size}" + (f"-rounds{FPS_BATCH}" if FPS_BATCH > 1 else "") + ("-vsp" if self.solver == "vsp" else "")
+            return f"k{self.size}-cloud{self.cloud}-surface2" + vsp
+        return f"k{self.size}" + (f"-rounds{FPS_BATCH}" if FPS_BATCH > 1 else "") + vsp
 
     def compute(self, vertices: np.ndarray, faces: np.ndarray, seed: int = 0) -> np.ndarray:
         """The fields of one mesh, float32 (N, K) or (N, m + 1); for a point-cloud model, of its vertices as
@@ -115,7 +118,7 @@ class FieldSpec:
         if self.cloud:
             from .pointcloud import cloud_landmark_solver, graph_parts, knn_edges
             part = graph_parts(len(vertices), knn_edges(vertices, self.cloud)[0])
-            solver = cloud_landmark_solver(vertices, part)
+            solver = cloud_landmark_solver(vertices, part, solver=self.solver)
             return [solver(self.size, seed).distances for seed in seeds]
         if self.kind == "landmark":
             solver = landmark_solver(vertices, faces, self.size, fields=self.solver)

@@ -193,25 +193,28 @@ def graph_parts(n: int, edges: np.ndarray) -> np.ndarray:
 
 
 def cloud_landmark_fields(points: np.ndarray, part: np.ndarray, k: int, seed: int = 0,
-                          t_coef: float = CLOUD_T_COEF, normals: np.ndarray | None = None) -> LandmarkFields:
-    """K farthest-point landmarks per part of the graph and their point-cloud heat-method distance fields
-    (float32 (N, K)), as :func:`gegnn.fields.landmarks.landmark_fields` on a mesh: deterministic for a given
+                          t_coef: float = CLOUD_T_COEF, normals: np.ndarray | None = None,
+                          solver: str = "heat") -> LandmarkFields:
+    """K farthest-point landmarks per part of the graph and their distance fields (float32 (N, K)) by the
+    point-cloud heat method (``solver`` "heat") or by virtual sources on the same local triangles ("vsp",
+    :mod:`gegnn.fields.cloud_vsp`), as :func:`gegnn.fields.landmarks.landmark_fields` on a mesh: deterministic for a given
     cloud, ``k`` and ``seed``; parts of fewer than MIN_PART points, or on a line, get distance 0 (as a
     mesh's parts of fewer than 3 vertices). ``normals``: the cloud's own oriented unit normals, if it has them (see
-    :func:`surface_neighbors`). The same as ``cloud_landmark_solver(points, part, t_coef, normals)(k, seed)``."""
-    return cloud_landmark_solver(points, part, t_coef, normals)(k, seed)
+    :func:`surface_neighbors`). The same as ``cloud_landmark_solver(points, part, t_coef, normals, solver)(k, seed)``."""
+    return cloud_landmark_solver(points, part, t_coef, normals, solver)(k, seed)
 
 
 def cloud_landmark_solver(points: np.ndarray, part: np.ndarray, t_coef: float = CLOUD_T_COEF,
-                          normals: np.ndarray | None = None) -> Callable[[int, int], LandmarkFields]:
-    """The heat method's row-by-row set-up on every part of the graph (surface neighbours, local
+                          normals: np.ndarray | None = None, solver: str = "heat"
+                          ) -> Callable[[int, int], LandmarkFields]:
+    """The fields' row-by-row set-up on every part of the graph (surface neighbours, local
     triangulations: on all of torch's threads), and a function ``(k, seed) -> LandmarkFields`` giving
     :func:`cloud_landmark_fields` from it: the covers and factorizations on its first call (one thread),
     then farthest-point landmarks along the surface neighbours (:func:`gegnn.fields.landmarks.graph_farthest_points`)
     and their fields all together, on torch's threads."""
     n_parts = int(part.max()) + 1
     groups = label_groups(part, n_parts)
-    builds = [_cloud_field(points[idx], t_coef, None if normals is None else normals[idx])
+    builds = [_cloud_field(points[idx], t_coef, None if normals is None else normals[idx], solver)
               if len(idx) >= MIN_PART and not collinear(points[idx]) else None for idx in groups]
     solvers = {}
 
@@ -276,14 +279,16 @@ def surface_neighbors(points: np.ndarray, k: int = HEAT_K, cone_deg: float = CON
     return out
 
 
-def _cloud_field(points: np.ndarray, t_coef: float, normals: np.ndarray | None = None):
-    """The point-cloud heat method on one part, in two steps: its :func:`surface_neighbors` (potpourri3d's
-    30 nearest where those would split the part) and local triangulations now, row by row on torch's
-    threads; then the edges (E, 2) of the landmarks' graph (each point to those neighbours), and a
-    function building ``distances(sources) -> (N, len(sources))`` from them
-    (:class:`gegnn.fields.cloud_heat.CloudHeatDistance`'s cover, flips and factorizations, on one thread), or
-    from potpourri3d itself on clouds that the method refuses (a degenerate neighbourhood)."""
+def _cloud_field(points: np.ndarray, t_coef: float, normals: np.ndarray | None = None, solver: str = "heat"):
+    """The fields of one part, in two steps: its :func:`surface_neighbors` (potpourri3d's 30 nearest where
+    those would split the part) and local triangulations now, row by row on torch's threads; then the edges
+    (E, 2) of the landmarks' graph (each point to those neighbours), and a function building
+    ``distances(sources) -> (N, len(sources))`` from them, on one thread: ``solver`` "heat",
+    :class:`gegnn.fields.cloud_heat.CloudHeatDistance`'s cover, flips and factorizations; "vsp",
+    :class:`gegnn.fields.cloud_vsp.CloudVirtualSources` on the same triangles; either from potpourri3d's heat
+    method on clouds that the local triangulation refuses (a degenerate neighbourhood)."""
     from .cloud_heat import CloudHeatDistance, local_triangulations
+    from .cloud_vsp import CloudVirtualSources
 
     points = np.ascontiguousarray(points, dtype=np.float64)
     neighbors = surface_neighbors(points, normals=normals)
@@ -297,11 +302,13 @@ def _cloud_field(points: np.ndarray, t_coef: float, normals: np.ndarray | None =
 
     def build():
         try:
+            if triangles is not None and solver == "vsp":
+                return CloudVirtualSources(points, triangles[1]).distances
             if triangles is not None:
                 return CloudHeatDistance(points, t_coef, neighbors, triangles).distances
         except ValueError:
             pass
         import potpourri3d as pp3d
-        solver = pp3d.PointCloudHeatSolver(points, t_coef=t_coef)
-        return lambda sources: np.stack([solver.compute_distance(int(s)) for s in sources], axis=1)
+        heat = pp3d.PointCloudHeatSolver(points, t_coef=t_coef)
+        return lambda sources: np.stack([heat.compute_distance(int(s)) for s in sources], axis=1)
     return (knn_edges(points, HEAT_K)[0] if neighbors is None else pairs), build

@@ -41,11 +41,12 @@ def test_specs_name_their_fields_and_read_a_models_config():
     assert (mesh.name, cloud.name, codes.name) == ("k64-rounds16", "k64-cloud8-surface2", "spectral32")
     assert (mesh.columns, codes.columns) == (64, 33)  # the spectral codes and their tail scale
     assert (mesh.draws, cloud.draws, codes.draws) == (LANDMARK_DRAWS, LANDMARK_DRAWS, 1) and LANDMARK_DRAWS > 1
-    # fields by virtual source propagation: their own folder, so heat and vsp fields never mix; a cloud's are
-    # its own whatever the config says
+    # fields by virtual source propagation: their own folder, so heat and vsp fields never mix, a mesh's and
+    # a cloud's (gegnn.fields.cloud_vsp) alike
     assert FieldSpec.of(small_config(landmarks=64, landmark_fields="vsp")) == FieldSpec("landmark", 64, 0, "vsp")
     assert FieldSpec("landmark", 64, 0, "vsp").name == "k64-rounds16-vsp"
-    assert FieldSpec.of(small_config(landmarks=64, points=8, landmark_fields="vsp")).name == cloud.name
+    assert FieldSpec.of(small_config(landmarks=64, points=8, landmark_fields="vsp")) == FieldSpec("landmark", 64, 8, "vsp")
+    assert FieldSpec("landmark", 64, 8, "vsp").name == "k64-cloud8-surface2-vsp"
     with pytest.raises(ValueError, match="landmark_fields must be one of heat, vsp"):
         small_config(landmarks=64, landmark_fields="exact")
 
