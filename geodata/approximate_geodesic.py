@@ -46,11 +46,12 @@ class ApproximateGeodesicSolver:
             faces form two or more fans.
         twins: (3M,) optional: the half-edge 3 g + j glued to each half-edge 3 f + k (from corner k to
             k + 1), -1 for none, each glued back; for a surface whose edges its two vertices do not tell
-            (a tufted cover: :mod:`gegnn.fields.cloud_vsp`). Pinched vertices are then taken: a path bends
-            there at the vertex's distance.
-        excess: (N,) optional: each vertex's angle excess for the gates, where the faces' corners do not
-            give it (default: their angle sum less 2 pi; with twins, half the sum, a cover's corners coming
-            twice; a cloud's overlapping triangulations need their own).
+            (a point cloud's triangle soup: :mod:`gegnn.fields.cloud_vsp`). Pinched vertices are then taken (a path bends
+            there at the vertex's distance), and each field ends with d_i <= d_j + |ij| over the edges
+            (a shortest-path queue: a fold can leave a vertex reached only the long way round).
+        excess: (N,) optional: each vertex's angle excess for the gates, where its faces' corner angles
+            (less 2 pi, the default) do not give it: a cloud's local triangulations overlap, a tufted cover
+            counts each corner twice.
 
     Raises:
         ValueError: naming what is wrong with the mesh (shapes, non-finite coordinates, indices out of

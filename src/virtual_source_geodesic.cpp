@@ -201,14 +201,17 @@ struct Workspace {
     Buckets buckets;
     Heap heap;
     int64_t processed = 0;
+    std::vector<int> queue;       // a cover's relaxation along its edges
+    std::vector<char> queued;
 };
 
 class VirtualSources {
 public:
     // twins (3 M, optional): the half-edge glued to each half-edge 3 f + k (-1: none), for surfaces whose
-    // edges are not told by their two vertices (a tufted cover: its angle excess is half its corners'
-    // sum less 2 pi, each corner counted twice); excess (N, optional): each vertex's angle excess where
-    // neither gives it (a cloud's overlapping local triangulations).
+    // edges are not told by their two vertices (a point cloud's triangle soup, glued in pairs around each
+    // edge or as its tufted cover); each field then ends relaxed along the edges (relax_along_edges).
+    // excess (N, optional): each vertex's angle excess where the faces' corners do not give it (a cloud's
+    // local triangulations overlap; a cover counts each corner twice).
     VirtualSources(const double* V, int64_t n, const int64_t* F, int64_t m, const int64_t* twins = nullptr,
                    const double* excess = nullptr)
         : n_(n), m_(m) {
@@ -241,8 +244,6 @@ public:
         build_frames(positions.data());
         if (excess)
             for (int64_t i = 0; i < n; ++i) excess_[i] = excess[old_of_new_[i]];
-        else if (twins)  // a cover's corners come twice, a front and a back
-            for (int64_t i = 0; i < n; ++i) excess_[i] = (excess_[i] + 2.0 * M_PI) / 2.0 - 2.0 * M_PI;
         if (twins) {
             std::vector<int> glued(3 * m);
             for (int64_t h = 0; h < 3 * m; ++h) {
@@ -265,7 +266,10 @@ public:
             build_unfoldings();
         }
         build_vertex_faces();
-        if (twins) return;  // a cover's vertices may join several fans: paths bend there (d of the vertex)
+        if (twins) {  // a soup's vertices may join several fans: paths bend there (d of the vertex)
+            build_edges();
+            return;
+        }
         if (const int64_t pinched = count_pinched())
             throw std::invalid_argument(std::to_string(pinched) +
                                         " non-manifold vertices (their faces form two or more fans)");
@@ -301,6 +305,7 @@ public:
             ++w.processed;
             hand_on(f, d, w, queue, probe, saddle);
         }
+        if (!edge_start_.empty()) relax_along_edges(d, w);
         for (int64_t i = 0; i < n_; ++i) out[old_of_new_[i]] = d[i];
     }
 
@@ -313,6 +318,63 @@ private:
     std::vector<double> frame_;        // per face: corner 1's x, corner 2's x and y (corner 0 at the origin)
     std::vector<Across> across_;       // per half-edge
     std::vector<int> vf_start_, vf_;   // per vertex: its faces' corners 3 f + k (CSR)
+    std::vector<int> edge_start_, edge_to_;  // a cover's: per vertex its neighbours along edges (CSR)
+    std::vector<double> edge_length_;
+
+    // A cover's edges, each vertex's neighbours and the lengths to them.
+    void build_edges() {
+        std::vector<std::pair<int, int>> pairs;
+        pairs.reserve(6 * m_);
+        for (int h = 0; h < 3 * m_; ++h) {
+            const int a = F_[h], b = F_[h % 3 == 2 ? h - 2 : h + 1];
+            pairs.push_back({a, b}), pairs.push_back({b, a});
+        }
+        std::sort(pairs.begin(), pairs.end());
+        pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
+        edge_start_.assign(n_ + 1, 0);
+        edge_to_.resize(pairs.size());
+        edge_length_.resize(pairs.size());
+        for (size_t i = 0; i < pairs.size(); ++i) {
+            ++edge_start_[pairs[i].first + 1];
+            edge_to_[i] = pairs[i].second;
+        }
+        for (int64_t v = 0; v < n_; ++v) edge_start_[v + 1] += edge_start_[v];
+        // the lengths, from a face's frame: the half-edge's own length
+        for (int h = 0; h < 3 * m_; ++h) {
+            const int f = h / 3, k = h % 3;
+            const Point p = corner(f, k), q = corner(f, (k + 1) % 3);
+            const int a = F_[h], b = F_[k == 2 ? h - 2 : h + 1];
+            const double l = norm(q.x - p.x, q.y - p.y);
+            for (const auto [u, v] : {std::pair{a, b}, std::pair{b, a}})
+                for (int i = edge_start_[u]; i < edge_start_[u + 1]; ++i)
+                    if (edge_to_[i] == v) edge_length_[i] = l;
+        }
+    }
+
+    // d_v <= d_u + |uv| over the cover's edges (a shortest-path queue from every vertex): folds can leave a
+    // vertex reached only the long way round, its straight neighbours nearer.
+    void relax_along_edges(double* d, Workspace& w) const {
+        w.queue.clear();
+        w.queued.assign(n_, 1);
+        for (int v = 0; v < n_; ++v) w.queue.push_back(v);
+        for (size_t head = 0; head < w.queue.size(); ++head) {
+            const int u = w.queue[head];
+            w.queued[u] = 0;
+            if (!(d[u] < INF)) continue;
+            for (int i = edge_start_[u]; i < edge_start_[u + 1]; ++i) {
+                const int v = edge_to_[i];
+                const double via = d[u] + edge_length_[i];
+                if (via < d[v]) {
+                    d[v] = via;
+                    if (!w.queued[v]) w.queued[v] = 1, w.queue.push_back(v);
+                }
+            }
+            if (head > static_cast<size_t>(n_) && head * 2 > w.queue.size()) {  // keep the queue's memory bounded
+                w.queue.erase(w.queue.begin(), w.queue.begin() + static_cast<std::ptrdiff_t>(head) + 1);
+                head = static_cast<size_t>(-1);
+            }
+        }
+    }
     double mean_edge_ = 1.0;
 
     Point corner(int f, int k) const {
@@ -613,9 +675,9 @@ NB_MODULE(_virtual_source_geodesic, m) {
             nb::arg("vertices"), nb::arg("faces"), nb::arg("twins") = nb::none(), nb::arg("excess") = nb::none(),
             "Precompute a mesh: vertices (N, 3) float64 and faces (M, 3) int64, both C-contiguous; twins\n"
             "(3 M,) int64: the half-edge 3 g + j glued to each half-edge 3 f + k (-1: none), where edges are not\n"
-            "paired by their vertices (a tufted cover; pinched vertices are then taken); excess (N,) float64:\n"
-            "each vertex's angle excess for the gates, where the corner angles do not give it (default: half\n"
-            "their sum less 2 pi with twins, the corners of a cover counted twice).")
+            "paired by their vertices (a point cloud's soup; pinched vertices are then taken, and each field ends\n"
+            "relaxed along the edges); excess (N,) float64:\n"
+            "each vertex's angle excess for the gates, where the corners' angle sums do not give it.")
         .def("n_vertices", &VirtualSources::n_vertices)
         .def(
             "distances",

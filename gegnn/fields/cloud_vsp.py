@@ -1,35 +1,65 @@
-r"""Point-cloud distance fields by virtual source propagation on the tufted cover of the points' local
-Delaunay triangulations: the mesh solver's accuracy where the triangles close into a surface, and no holes
-where they do not.
+r"""Point-cloud distance fields by virtual source propagation on the points' local Delaunay triangles,
+glued in pairs around each edge: the mesh solver's accuracy where the triangles close into a surface.
 
 The soup is every point's local triangles (:func:`gegnn.fields.cloud_heat.local_triangulations`, the
-point-cloud heat method's), each distinct triangle once. It is no mesh: an edge may have one face or
-five. Its tufted cover (Sharp and Crane 2020, :func:`gegnn.fields.heat.tufted_cover`) is: every triangle
-twice, a front and a back, glued so that each edge joins exactly two faces (around an edge of n
-triangles, each one's back to the next one's front). Its intrinsic geometry is the soup's: a path on the
-cover is a path over the triangles, and between two triangles of one edge it may pass either way. The
-virtual-source solver (:mod:`geodata.approximate_geodesic`) lays faces out from their edges alone, so it
-runs on the cover as given, its half-edges glued explicitly (``twins``).
+point-cloud heat method's), each distinct triangle once, those more points' triangulations agree on first.
+It is no mesh: an edge may have one face or five. The virtual-source solver
+(:mod:`geodata.approximate_geodesic`) lays each face out from its own edges and hands a source across a
+glued pair of half-edges, so it runs on the soup as given with the gluing explicit (``twins``):
 
-The gates of the solver (saddle vertices, angle excess over 0.05 rad) take each point's excess from its
-own local triangles, :math:`\sum_{(i, a, b)} \angle a i b - 2\pi` over the triangles point i emitted:
-the cover counts every corner twice and the soup a point's corners of every triangulation it is in.
+* **pairs** (the default, :func:`paired_mesh`): around each edge its faces in soup order, the first glued
+  to the second, the third to the fourth; an odd one out is a boundary there. Every triangle is kept, once.
+* **cover** (:func:`cover_mesh`): the soup's tufted cover (Sharp and Crane 2020,
+  :func:`gegnn.fields.heat.tufted_cover`, as the cloud heat method's Laplacian): every triangle twice, a
+  front and a back, each edge's n triangles glued in a ring (each one's back to the next one's front).
 
-Measured (``benchmarks/bench_field_solver.py --cloud-lower-bound``, six meshes' vertices as clouds, the
-landmark bound at K = 256, mean relative error): 2.56% against the point-cloud heat method's 3.67%; the
-same solver on a manifold copy of the soup (its non-manifold triangles set aside) left holes: 4.35%.
-Where two parts lie within a spacing (thin parts, a flipper on a body) the local triangles bridge them
-and the fields take the bridge at full length: too short there, as the heat method is.
+Measured, the landmark bound at K = 256 over 20 sources x every point (``benchmarks/bench_field_solver.py
+--cloud-lower-bound``), max / camel / cheburashka / penguin: pairs 0.53 / 3.66 / 2.00 / 7.58%, cover
+0.49 / 2.90 / 2.58 / 7.46%, the cloud heat method 2.10 / 4.09 / 2.10 / 8.48%; the shipped points model on
+the 19 validation clouds (``gegnn eval``, all stored pairs): pairs 2.98%, cover 3.09% (pairs better on 17 of
+19), the cloud heat method's fields 3.47%; 256 fields at 5k points 0.36 s (pairs), 1.03 s (cover), 0.23 s
+(the heat method), one core. Setting the soup's non-manifold triangles aside instead (a manifold copy)
+leaves holes that paths go around: 4.35% against the heat method's 3.67% on six meshes.
+
+Cut edges can leave a point reached only the long way round while its straight neighbours are near (a
+2,000-point cloud of the dragon had one, 7x too far from a landmark, and the network's answers over the
+whole cloud were 160% off): with twins the solver ends each field with :math:`d_i \le d_j + |p_i - p_j|`
+over the edges (a shortest-path queue from every point; it lowers 8-17% of the values, by 0.06% at the
+median, and moves the fields' mean error by under 0.01 points).
+
+The solver's gates (saddle vertices, angle excess over 0.05 rad) take each point's excess from its own
+local triangles, :math:`\sum_{(i, a, b)} \angle a i b - 2\pi` over the triangles point i emitted: the
+soup holds a point's corners of every triangulation it is in (and a cover each twice).
+
+Where two parts lie within a spacing (thin parts, a flipper on a body) the local triangles bridge them and
+the fields take the bridge at full length: too short there, as the heat method's are.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from geodata.mesh import unique_edges
-
 from .heat import tufted_cover
 
-__all__ = ["CloudVirtualSources", "cover_mesh", "own_excess", "relax_along_edges"]
+__all__ = ["CloudVirtualSources", "paired_mesh", "cover_mesh", "own_excess", "GLUINGS"]
+
+GLUINGS = ("pairs", "cover")
+
+
+def paired_mesh(points: np.ndarray, soup: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The soup (F, 3) itself with twins (3F,): around each edge its half-edges in face order, glued in
+    pairs (first to second, third to fourth, ...), an odd one out left a boundary there."""
+    n = len(points)
+    tail, tip = soup.ravel(), soup[:, [1, 2, 0]].ravel()
+    key = np.minimum(tail, tip) * n + np.maximum(tail, tip)
+    order = np.lexsort((np.arange(len(key)), key))
+    k = key[order]
+    starts = np.flatnonzero(np.r_[True, k[1:] != k[:-1]])
+    sizes = np.diff(np.r_[starts, len(k)])
+    rank = np.arange(len(k)) - np.repeat(starts, sizes)     # place around its edge
+    first = np.flatnonzero((rank % 2 == 0) & (rank + 1 < np.repeat(sizes, sizes)))
+    twins = np.full(len(key), -1, dtype=np.int64)
+    twins[order[first]], twins[order[first + 1]] = order[first + 1], order[first]
+    return soup.astype(np.int64), twins
 
 
 def cover_mesh(points: np.ndarray, soup: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -60,43 +90,25 @@ def own_excess(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
 
 class CloudVirtualSources:
     """Distance fields on one point cloud from its local triangles (N, 3 points; the (F, 3) soup of
-    :func:`gegnn.fields.cloud_heat.local_triangulations`, each triangle emitted by its first corner).
+    :func:`gegnn.fields.cloud_heat.local_triangulations`, each triangle emitted by its first corner), glued
+    in ``pairs`` or as their ``cover`` (module docstring).
 
     ValueError where the points or triangles are not a cloud's (shapes, non-finite coordinates, indices
     out of range)."""
 
-    def __init__(self, points: np.ndarray, triangles: np.ndarray):
+    def __init__(self, points: np.ndarray, triangles: np.ndarray, gluing: str = "pairs"):
         from geodata.approximate_geodesic import ApproximateGeodesicSolver
 
         points = np.ascontiguousarray(points, dtype=np.float64)
         triangles = np.asarray(triangles, dtype=np.int64)
-        soup = triangles[np.unique(np.sort(triangles, axis=1), axis=0, return_index=True)[1]]
-        faces, twins = cover_mesh(points, soup)
+        _, first, agree = np.unique(np.sort(triangles, axis=1), axis=0, return_index=True, return_counts=True)
+        soup = triangles[first[np.argsort(-agree, kind="stable")]]  # most agreed first
+        if gluing not in GLUINGS:
+            raise ValueError(f"gluing must be one of {', '.join(GLUINGS)}, got {gluing!r}")
+        faces, twins = (paired_mesh if gluing == "pairs" else cover_mesh)(points, soup)
         self.n_points = len(points)
-        self._points = points
-        self._edges = unique_edges(soup)
         self._solver = ApproximateGeodesicSolver(points, faces, twins=twins, excess=own_excess(points, triangles))
 
     def distances(self, sources, threads: int = 1) -> np.ndarray:
-        """Distances (N, len(sources)) from each source point to every point (``inf`` on other parts),
-        each at most a soup edge's length beyond its neighbour's (:func:`relax_along_edges`)."""
-        d = self._solver.distances(np.asarray(sources, dtype=np.int64), threads=threads).T
-        return relax_along_edges(d, self._points, self._edges)
-
-
-def relax_along_edges(fields: np.ndarray, points: np.ndarray, edges: np.ndarray) -> np.ndarray:
-    """``fields`` (N, S) with every value at most its neighbour's plus their edge's length,
-    :math:`d_i \le d_j + |p_i - p_j|` over ``edges`` (E, 2) (Bellman-Ford rounds on the edges of the
-    points that moved, until none does). A distance field obeys it; a point that the cover reaches only
-    by a detour (folds around it) does not, and gets its neighbours' value plus the step."""
-    a, b = edges.T
-    w = np.linalg.norm(points[a] - points[b], axis=1)[:, None]
-    active = np.ones(len(edges), dtype=bool)
-    while active.any():
-        ea, eb, ew = a[active], b[active], w[active]
-        before = fields.copy()
-        np.minimum.at(fields, ea, fields[eb] + ew)
-        np.minimum.at(fields, eb, fields[ea] + ew)
-        moved = (fields < before).any(axis=1)
-        active = moved[a] | moved[b]
-    return fields
+        """Distances (N, len(sources)) from each source point to every point (``inf`` on other parts)."""
+        return self._solver.distances(np.asarray(sources, dtype=np.int64), threads=threads).T
