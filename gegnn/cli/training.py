@@ -119,7 +119,8 @@ def _blocks(ctx, param, value):
 @click.option("--landmark-fields", type=click.Choice(["heat", "vsp"]), default="heat", show_default=True,
               help="The landmark fields' solver: the heat method (~1.9% from exact; the shipped landmark models "
                    "up to v2) or virtual source propagation (vsp: ~0.15% from exact, ~1.5 ms a field at 5k "
-                   "vertices). A model reads the fields it was trained with.")
+                   "vertices; a point-cloud model's on its points' local triangles). A model reads the fields it "
+                   "was trained with.")
 @click.option("--landmark-no-embedding", is_flag=True, help="Ablation: the decoder reads landmarks only.")
 @click.option("--landmark-no-euclidean", is_flag=True, help="Ablation: drop the straight-line distance input.")
 @click.option("--spectral", default=0, show_default=True, metavar="M",
@@ -134,8 +135,8 @@ def _blocks(ctx, param, value):
               help="d = L exp(MLP), or (ablation) d = L + (U - L) sigmoid(MLP); L, U: the landmark bounds.")
 @click.option("--neighbors", type=click.IntRange(0), default=None, is_flag=False, flag_value=8, metavar="[K]",
               help="Point-cloud model: each mesh's vertices are read as a cloud (faces unused): graph of the K "
-                   "nearest neighbours (--neighbors alone: 8), estimated normals, point-cloud heat-method landmark "
-                   "fields (default 0: meshes). With --init, a mesh model's weights start it.")
+                   "nearest neighbours (--neighbors alone: 8), estimated normals, landmark fields from the points "
+                   "alone (default 0: meshes). With --init, a mesh model's weights start it.")
 @old_name("--points", "--neighbors", "old_points", type=click.IntRange(0), is_flag=False, flag_value=8)
 def train(run_dir, no_rotate, preset_name, init_ckpt, channels, blocks, aggr, no_edge_length, no_relative_position,
           plain_grid_pool, euclidean_decoder, landmarks, landmark_fields, landmark_no_embedding, landmark_no_euclidean,

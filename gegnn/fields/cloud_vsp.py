@@ -13,13 +13,13 @@ glued pair of half-edges, so it runs on the soup as given with the gluing explic
   :func:`gegnn.fields.heat.tufted_cover`, as the cloud heat method's Laplacian): every triangle twice, a
   front and a back, each edge's n triangles glued in a ring (each one's back to the next one's front).
 
-Measured, the landmark bound at K = 256 over 20 sources x every point (``benchmarks/bench_field_solver.py
---cloud-lower-bound``), max / camel / cheburashka / penguin: pairs 0.53 / 3.66 / 2.00 / 7.58%, cover
-0.49 / 2.90 / 2.58 / 7.46%, the cloud heat method 2.10 / 4.09 / 2.10 / 8.48%; the shipped points model on
-the 19 validation clouds (``gegnn eval``, all stored pairs): pairs 2.98%, cover 3.09% (pairs better on 17 of
-19), the cloud heat method's fields 3.47%; 256 fields at 5k points 0.36 s (pairs), 1.03 s (cover), 0.23 s
-(the heat method), one core. Setting the soup's non-manifold triangles aside instead (a manifold copy)
-leaves holes that paths go around: 4.35% against the heat method's 3.67% on six meshes.
+Measured, the landmark bound at K = 256 over 20 sources x every point of six meshes' vertices taken as clouds
+(``benchmarks/bench_field_solver.py --cloud-lower-bound``, docs/notes/pointclouds-lab.md): pairs 2.65%, cover
+2.59%, the cloud heat method 3.67% (exact fields 0.40%); landmark-v3's weights on the 19 validation clouds
+(``gegnn eval``, all stored pairs): pairs 2.98%, cover 3.09% (pairs better on 17 of 19; landmark-v2's weights
+on the cloud heat method's fields: 3.47%); 256 fields at 5k points 0.36 s (pairs), 1.03 s (cover), 0.23 s
+(the heat method), one core beside a training run. Setting the soup's non-manifold triangles aside instead
+(a manifold copy) leaves holes that paths go around: 4.35%.
 
 Cut edges can leave a point reached only the long way round while its straight neighbours are near (a
 2,000-point cloud of the dragon had one, 7x too far from a landmark, and the network's answers over the

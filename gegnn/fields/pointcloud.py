@@ -15,10 +15,12 @@ r"""Point clouds as GeGnn inputs: the graph, the normals and the landmark fields
   :math:`1 - |n_i \cdot n_j|` (Hoppe et al. 1992), each part's tree rooted at its point farthest
   from the part's centroid, whose normal points away from it (outwards on a closed surface).
 * **Landmark fields**: farthest-point landmarks on every part of the graph, by shortest paths along the
-  surface neighbours below (:func:`gegnn.fields.landmarks.graph_farthest_points`), and their distance fields by
-  the point-cloud heat method (potpourri3d's ``PointCloudHeatSolver``: the heat method on the tufted
-  Laplacian of the points' local Delaunay triangulations, Sharp and Crane 2020; computed by
-  :mod:`gegnn.fields.cloud_heat`), all solved together. (Meshes take each next landmark from the heat fields
+  surface neighbours below (:func:`gegnn.fields.landmarks.graph_farthest_points`), and their distance fields
+  from the points' local Delaunay triangulations: by the point-cloud heat method (``solver="heat"``,
+  potpourri3d's ``PointCloudHeatSolver``: the heat method on their tufted Laplacian, Sharp and Crane 2020;
+  computed by :mod:`gegnn.fields.cloud_heat`), all solved together; or by virtual source propagation on
+  the same triangles (``"vsp"``, :mod:`gegnn.fields.cloud_vsp`: the landmark bound at K = 256 a third
+  lower), one after the other. A model's ``landmark_fields`` says which. (Meshes take each next landmark from the heat fields
   so far, :mod:`gegnn.fields.landmarks`, which keeps the fields one after the other; along the graph the
   validation clouds' errors stay within 0.02 points of that, at 8k points the fields take 0.1 s instead
   of 0.2 s.) Each point's local triangulation
