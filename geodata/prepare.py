@@ -19,7 +19,7 @@ from typing import NamedTuple
 import numpy as np
 
 from geodata import store
-from geodata.geodesic import exact_geodesic_pairs
+from geodata.geodesic import APPROXIMATE, exact_geodesic_pairs
 from geodata.mesh import Mesh, MeshError, one_line, require_closed_manifold, unique_edges, vertex_normals
 from geodata.parallel import current_stage, in_shard, run_isolated
 from geodata.stages.load import MESH_SUFFIXES, load_mesh_bytes
@@ -46,8 +46,13 @@ class PrepareConfig:
     max_memory: int | None = None  # bytes one mesh's process may use (None: no limit)
 
     def store_params(self) -> dict:
-        """The parameters that decide the data (a store holds one setting of them)."""
-        return {k: v for k, v in asdict(self).items() if k not in ("timeout", "max_memory")}
+        """The parameters that decide the data (a store holds one setting of them); an approximate geodesic
+        backend adds ``geodesic_error``, what its distances are (exact backends add nothing: their stores'
+        parameters are as before)."""
+        params = {k: v for k, v in asdict(self).items() if k not in ("timeout", "max_memory")}
+        if self.geodesic_backend in APPROXIMATE:
+            params["geodesic_error"] = APPROXIMATE[self.geodesic_backend]
+        return params
 
 
 @dataclass(frozen=True)
