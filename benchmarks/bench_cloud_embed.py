@@ -2,9 +2,10 @@
 of a mesh, on one torch thread and on several, alternated in one process, and where the time goes.
 
     python benchmarks/bench_cloud_embed.py [--points 5000 8000] [--threads 1 2] [--rounds 10] [--mesh]
+        [--models points points-v2]
 
-bumpy_sphere clouds (``geodata.examples.bumpy_sphere``: its vertices); ``--mesh`` adds the landmark mesh model
-on the same meshes. Settings: each thread count (``torch.set_num_threads``: the k-d trees, the blocks of
+bumpy_sphere clouds (``geodata.examples.bumpy_sphere``: its vertices), embedded by each shipped cloud model of
+``--models`` (default: the shipped ``points``); ``--mesh`` adds the landmark mesh model on the same meshes. Settings: each thread count (``torch.set_num_threads``: the k-d trees, the blocks of
 rows, the U-Net beside the landmark fields and the fields' blocks of sources follow it, gegnn/threads.py)
 and, as the reference, the last thread count with every step on the caller's thread one after the other
 (``by_rows`` and ``beside`` run inline; the k-d trees and the fields' blocks still on all threads). Each
@@ -24,6 +25,7 @@ import numpy as np
 import torch
 
 import gegnn.fields.cloud_heat as cloud_heat
+import gegnn.fields.cloud_vsp as cloud_vsp
 import gegnn.fields.heat as heat
 import gegnn.model
 import gegnn.fields.pointcloud as pointcloud
@@ -35,9 +37,11 @@ STEPS = [(pointcloud, "mls_project", "projection"), (pointcloud, "knn_edges", "k
          (pointcloud, "orient_normals", "normals' orientation (beside, before the U-Net)"),
          (pointcloud, "surface_neighbors", "surface neighbours"),
          (pointcloud, "cloud_landmark_solver", "row-by-row set-up: surface neighbours, local triangulations"),
-         (cloud_heat, "CloudHeatDistance", "cover, flips, operators, factorizations"),
-         (pointcloud, "graph_farthest_points", "128 landmarks along the surface neighbours"),
-         (heat.HeatSolver, "distances", "their 128 fields, all together")]
+         (cloud_heat, "CloudHeatDistance", "heat method: cover, flips, operators, factorizations"),
+         (cloud_vsp, "CloudVirtualSources", "virtual sources: the local triangles glued"),
+         (pointcloud, "graph_farthest_points", "landmarks along the surface neighbours"),
+         (heat.HeatSolver, "distances", "heat method: their fields, all together"),
+         (cloud_vsp.CloudVirtualSources, "distances", "virtual sources: their fields, one after the other")]
 
 
 @contextmanager
@@ -93,8 +97,9 @@ def main():
     ap.add_argument("--threads", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--rounds", type=int, default=10)
     ap.add_argument("--mesh", action="store_true", help="also the landmark mesh model on the same meshes")
+    ap.add_argument("--models", nargs="+", default=["points"], help="shipped point-cloud models to compare")
     args = ap.parse_args()
-    models = {"cloud": GeGnn.pretrained("points")}
+    models = {name: GeGnn.pretrained(name) for name in args.models}
     if args.mesh:
         models["mesh"] = GeGnn.pretrained("landmark")
     print(f"{cpu_description()}; torch {torch.__version__}\n")
@@ -103,7 +108,7 @@ def main():
         mesh = bumpy_sphere(n)
         vertices, faces = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces)
         for name, model in models.items():
-            call = (lambda: model.embed(vertices)) if name == "cloud" else (lambda: model.embed(vertices, faces))
+            call = (lambda: model.embed(vertices)) if model.config.points else (lambda: model.embed(vertices, faces))
             settings = [(t, False) for t in args.threads] + [(args.threads[-1], True)]
             times = {s: [] for s in settings}
             call()  # warm-up
@@ -121,10 +126,11 @@ def main():
                 print(f"| {name} | {len(vertices)} | {label} | {min(values):.3f} | {median:.3f} | {median / base:.2f} |")
     torch.set_num_threads(args.threads[-1])
     for n in args.points:
-        seen = spans(models["cloud"], np.asarray(bumpy_sphere(n).vertices, dtype=np.float64))
-        print(f"\nsteps of one cloud embed, {n} points, {args.threads[-1]} threads (start - end, ms):")
-        for name, (a, b) in sorted(seen.items(), key=lambda item: item[1]):
-            print(f"  {1000 * a:6.0f} - {1000 * b:6.0f}  {name}")
+        for model_name in args.models:
+            seen = spans(models[model_name], np.asarray(bumpy_sphere(n).vertices, dtype=np.float64))
+            print(f"\nsteps of one {model_name} embed, {n} points, {args.threads[-1]} threads (start - end, ms):")
+            for name, (a, b) in sorted(seen.items(), key=lambda item: item[1]):
+                print(f"  {1000 * a:6.0f} - {1000 * b:6.0f}  {name}")
 
 
 if __name__ == "__main__":
