@@ -41,7 +41,9 @@
 //
 // Edges are paired by their two vertices: an edge with one face is a boundary (no face across it), one
 // with three or more is refused, and so is a vertex whose faces form two or more fans (nothing hands a
-// source through a vertex). Faces may be oriented against each other. Vertices of other connected parts stay at infinity. Memory: 64 bytes a
+// source through a vertex). Faces may be oriented against each other. Vertices of other connected parts
+// stay at infinity. A triangle soup (a point cloud's local triangles) comes with its gluing instead, each
+// half-edge's twin given; its fields end relaxed along its edges (relax_along_edges). Memory: 64 bytes a
 // half-edge (its unfolding, one cache line), 48 a face and 24 a vertex, and per thread 72 a face and 8
 // a vertex: ~0.5 kB a vertex in all.
 #include <nanobind/nanobind.h>
@@ -201,7 +203,7 @@ struct Workspace {
     Buckets buckets;
     Heap heap;
     int64_t processed = 0;
-    std::vector<int> queue;       // a cover's relaxation along its edges
+    std::vector<int> queue;       // a glued soup's relaxation along its edges
     std::vector<char> queued;
 };
 
@@ -318,10 +320,10 @@ private:
     std::vector<double> frame_;        // per face: corner 1's x, corner 2's x and y (corner 0 at the origin)
     std::vector<Across> across_;       // per half-edge
     std::vector<int> vf_start_, vf_;   // per vertex: its faces' corners 3 f + k (CSR)
-    std::vector<int> edge_start_, edge_to_;  // a cover's: per vertex its neighbours along edges (CSR)
+    std::vector<int> edge_start_, edge_to_;  // a glued soup's: per vertex its neighbours along edges (CSR)
     std::vector<double> edge_length_;
 
-    // A cover's edges, each vertex's neighbours and the lengths to them.
+    // A glued soup's edges: each vertex's neighbours and the lengths to them.
     void build_edges() {
         std::vector<std::pair<int, int>> pairs;
         pairs.reserve(6 * m_);
@@ -351,8 +353,8 @@ private:
         }
     }
 
-    // d_v <= d_u + |uv| over the cover's edges (a shortest-path queue from every vertex): folds can leave a
-    // vertex reached only the long way round, its straight neighbours nearer.
+    // d_v <= d_u + |uv| over a glued soup's edges (a shortest-path queue from every vertex): edges left
+    // unglued can leave a vertex reached only the long way round, its straight neighbours nearer.
     void relax_along_edges(double* d, Workspace& w) const {
         w.queue.clear();
         w.queued.assign(n_, 1);
