@@ -99,12 +99,12 @@ class CloudVirtualSources:
     def __init__(self, points: np.ndarray, triangles: np.ndarray, gluing: str = "pairs"):
         from geodata.approximate_geodesic import ApproximateGeodesicSolver
 
+        if gluing not in GLUINGS:
+            raise ValueError(f"gluing must be one of {', '.join(GLUINGS)}, got {gluing!r}")
         points = np.ascontiguousarray(points, dtype=np.float64)
         triangles = np.asarray(triangles, dtype=np.int64)
         _, first, agree = np.unique(np.sort(triangles, axis=1), axis=0, return_index=True, return_counts=True)
         soup = triangles[first[np.argsort(-agree, kind="stable")]]  # most agreed first
-        if gluing not in GLUINGS:
-            raise ValueError(f"gluing must be one of {', '.join(GLUINGS)}, got {gluing!r}")
         faces, twins = (paired_mesh if gluing == "pairs" else cover_mesh)(points, soup)
         self.n_points = len(points)
         self._solver = ApproximateGeodesicSolver(points, faces, twins=twins, excess=own_excess(points, triangles))
