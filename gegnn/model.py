@@ -33,8 +33,9 @@ PRETRAINED = {
     "landmark-v1": "gegnn-landmark-v1.safetensors",  # the one before, K = 128
     "paper": "gegnn-classic-v1.safetensors",      # the paper's model (no landmarks)
     "biharmonic": "gegnn-biharmonic-v1.safetensors",  # biharmonic distances: spectral codes + Weyl tail
-    "points": "gegnn-points-v2.safetensors",      # point clouds: the landmark model's weights on a kNN graph
-    "points-v1": "gegnn-points-v1.safetensors",   # the previous one (gegnn-landmark-v1's weights, K = 128)
+    "points": "gegnn-points-v3.safetensors",      # point clouds: landmark-v3's weights on a kNN graph, vsp fields
+    "points-v2": "gegnn-points-v2.safetensors",   # the previous one (landmark-v2's weights, cloud heat-method fields)
+    "points-v1": "gegnn-points-v1.safetensors",   # the one before (gegnn-landmark-v1's weights, K = 128)
 }
 
 
@@ -281,7 +282,8 @@ class GeGnn(nn.Module):
                 model, landmark-v3: K = 256 landmark fields by virtual source propagation), ``"landmark-v2"``
                 (the previous default, heat-method fields), ``"landmark-v1"`` (K = 128), ``"paper"``
                 (the paper's model), ``"biharmonic"`` (biharmonic distances), ``"points"`` (point clouds:
-                ``model.embed(points)``) or ``"points-v1"`` (the previous one).
+                ``model.embed(points)``; points-v3, landmark-v3's weights on fields by virtual sources),
+                ``"points-v2"`` or ``"points-v1"`` (the previous ones, cloud heat-method fields).
         """
         with pretrained_file(name) as path:
             return cls.from_checkpoint(path, map_location)
