@@ -20,9 +20,12 @@ gegnn export "$weights/gegnn-landmark-v2.safetensors" "$weights/gegnn-points-v2.
 bash pipelines/landmark/more_landmarks.sh "$data" "$runs" 384 "$weights/gegnn-landmark-v2.safetensors" lm384-v3
 gegnn export "$runs/lm384-v3/best.safetensors" "$runs/gegnn-landmark-v3.safetensors" --dtype fp16
 
-# landmark-v3 (K = 256, the default since 2026-11-27): v2's weights trained on landmark fields by virtual sources
+# landmark-v3 (K = 256, the default since 2026-11-27): v2's weights trained on landmark fields by virtual sources,
+# and its point-cloud twin points-v3 (the shipped "points" since 2026-11-28: virtual sources on the cloud's own
+# local triangles)
 bash pipelines/landmark/more_landmarks.sh "$data" "$runs" 256 "$weights/gegnn-landmark-v2.safetensors" lm256-v3 vsp
 gegnn export "$runs/lm256-v3/best.safetensors" "$weights/gegnn-landmark-v3.safetensors" --dtype fp16
+gegnn export "$weights/gegnn-landmark-v3.safetensors" "$weights/gegnn-points-v3.safetensors" --neighbors 8
 
 python benchmarks/ablation_k.py "$data/val.zarr" "landmark-v3=$weights/gegnn-landmark-v3.safetensors" --record
 python benchmarks/ablation_k.py "$data/val.zarr" "landmark-v2=$weights/gegnn-landmark-v2.safetensors" \
@@ -31,3 +34,4 @@ python benchmarks/ablation_k.py "$data/val.zarr" "v2@384=$weights/gegnn-landmark
     "v3=$runs/gegnn-landmark-v3.safetensors" "v3@256=$runs/gegnn-landmark-v3.safetensors@256"
 python benchmarks/bench_queries.py "$data/val.zarr" --only queries --record
 OMP_NUM_THREADS=1 gegnn eval "$weights/gegnn-points-v2.safetensors" "$data/val.zarr"
+OMP_NUM_THREADS=1 gegnn eval "$weights/gegnn-points-v3.safetensors" "$data/val.zarr"
