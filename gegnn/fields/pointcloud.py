@@ -285,10 +285,11 @@ def _cloud_field(points: np.ndarray, t_coef: float, normals: np.ndarray | None =
     """The fields of one part, in two steps: its :func:`surface_neighbors` (potpourri3d's 30 nearest where
     those would split the part) and local triangulations now, row by row on torch's threads; then the edges
     (E, 2) of the landmarks' graph (each point to those neighbours), and a function building
-    ``distances(sources) -> (N, len(sources))`` from them, on one thread: ``solver`` "heat",
-    :class:`gegnn.fields.cloud_heat.CloudHeatDistance`'s cover, flips and factorizations; "vsp",
-    :class:`gegnn.fields.cloud_vsp.CloudVirtualSources` on the same triangles; either from potpourri3d's heat
-    method on clouds that the local triangulation refuses (a degenerate neighbourhood)."""
+    ``distances(sources) -> (N, len(sources))`` from them: ``solver`` "heat",
+    :class:`gegnn.fields.cloud_heat.CloudHeatDistance`'s cover, flips and factorizations (built on one thread);
+    "vsp", :class:`gegnn.fields.cloud_vsp.CloudVirtualSources` on the same triangles, the sources on torch's
+    threads; either from potpourri3d's heat method on clouds that the local triangulation refuses (a
+    degenerate neighbourhood)."""
     from .cloud_heat import CloudHeatDistance, local_triangulations
     from .cloud_vsp import CloudVirtualSources
 
@@ -304,8 +305,9 @@ def _cloud_field(points: np.ndarray, t_coef: float, normals: np.ndarray | None =
 
     def build():
         try:
-            if triangles is not None and solver == "vsp":
-                return CloudVirtualSources(points, triangles[1]).distances
+            if triangles is not None and solver == "vsp":  # the sources on all threads (the same fields)
+                fields = CloudVirtualSources(points, triangles[1])
+                return lambda sources: fields.distances(sources, threads=threads.count())
             if triangles is not None:
                 return CloudHeatDistance(points, t_coef, neighbors, triangles).distances
         except ValueError:
