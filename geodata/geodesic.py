@@ -11,9 +11,9 @@ Three backends compute the same exact distances:
 and one approximates them, for meshes too large for an exact solve of every source:
 
 - ``vsp``: virtual source propagation (:mod:`geodata.approximate_geodesic`), ~0.15% from exact on
-  average (``APPROXIMATE``) (a few percent at a field's worst vertex), 15-40x faster than vtp at 5k vertices and linear in
+  average (a few percent at a field's worst vertex), 15-40x faster than vtp at 5k vertices and linear in
   the mesh (738 ms a field at 1.35M vertices, where vtp takes ~100 s). A store made with it says so in its
-  parameters (``geodesic_error``).
+  parameters (``geodesic_error``: ``APPROXIMATE``).
 
 Kirsanov's code segfaults on non-manifold input, so every call first checks the closed-manifold
 invariants; the same guard keeps the contract of the ``vtp`` solver, which is only tested on such meshes.
@@ -26,8 +26,8 @@ import numpy as np
 
 from geodata.mesh import Mesh, MeshError, require_closed_manifold, vertex_components
 
-__all__ = ["BACKENDS", "APPROXIMATE", "geodesic_solver", "exact_geodesic_distances", "sample_sources", "exact_geodesic_pairs",
-           "polyline_length", "edge_flip_paths", "exact_memory_estimate", "available_memory"]
+__all__ = ["BACKENDS", "APPROXIMATE", "geodesic_solver", "exact_geodesic_distances", "sample_sources",
+           "exact_geodesic_pairs", "polyline_length", "edge_flip_paths", "exact_memory_estimate", "available_memory"]
 
 BACKENDS = ("vtp", "gdist", "libigl", "vsp")
 APPROXIMATE = {"vsp": "approximate: virtual source propagation, ~0.15% mean relative error from exact "

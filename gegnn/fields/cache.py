@@ -62,8 +62,8 @@ class FieldSpec:
     modes and the tail scale), and K or m; ``cloud``: the k of a point-cloud model's neighbour graph, whose
     landmark fields come from the points alone (:mod:`gegnn.fields.pointcloud`), 0 for a mesh model;
     ``solver``: the landmark fields by the heat method (``"heat"``) or by virtual source propagation
-    (``"vsp"``: a mesh's by :func:`gegnn.fields.landmarks.landmark_solver`, a cloud's on its local triangles'
-    tufted cover, :mod:`gegnn.fields.cloud_vsp`)."""
+    (``"vsp"``: a mesh's by :func:`gegnn.fields.landmarks.landmark_solver`, a cloud's on its local triangles
+    glued in pairs, :mod:`gegnn.fields.cloud_vsp`)."""
 
     kind: str
     size: int

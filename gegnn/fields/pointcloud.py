@@ -19,12 +19,11 @@ r"""Point clouds as GeGnn inputs: the graph, the normals and the landmark fields
   from the points' local Delaunay triangulations: by the point-cloud heat method (``solver="heat"``,
   potpourri3d's ``PointCloudHeatSolver``: the heat method on their tufted Laplacian, Sharp and Crane 2020;
   computed by :mod:`gegnn.fields.cloud_heat`), all solved together; or by virtual source propagation on
-  the same triangles (``"vsp"``, :mod:`gegnn.fields.cloud_vsp`: the landmark bound at K = 256 a third
-  lower), one after the other. A model's ``landmark_fields`` says which. (Meshes take each next landmark from the heat fields
-  so far, :mod:`gegnn.fields.landmarks`, which keeps the fields one after the other; along the graph the
-  validation clouds' errors stay within 0.02 points of that, at 8k points the fields take 0.1 s instead
-  of 0.2 s.) Each point's local triangulation
-  from neighbours near its tangent plane (:func:`surface_neighbors`), not across a gap to a nearby part
+  the same triangles (``"vsp"``, :mod:`gegnn.fields.cloud_vsp`: the landmark bound at K = 256 a quarter
+  lower), the sources on torch's threads. A model's ``landmark_fields`` says which. (Meshes take each next
+  landmark from the heat fields so far, :mod:`gegnn.fields.landmarks`, which keeps the fields one after the
+  other; along the graph the validation clouds' errors stay within 0.02 points of that, at 8k points the
+  fields take 0.1 s instead of 0.2 s.) Each point's local triangulation from neighbours near its tangent plane (:func:`surface_neighbors`), not across a gap to a nearby part
   (heat-method MRE on the validation clouds 4.22% -> 3.85%), and with a scan's own oriented normals
   only from neighbours facing the same side (3.93% -> 3.32% with the meshes' normals).
 
@@ -211,8 +210,8 @@ def cloud_landmark_solver(points: np.ndarray, part: np.ndarray, t_coef: float = 
                           ) -> Callable[[int, int], LandmarkFields]:
     """The fields' row-by-row set-up on every part of the graph (surface neighbours, local
     triangulations: on all of torch's threads), and a function ``(k, seed) -> LandmarkFields`` giving
-    :func:`cloud_landmark_fields` from it: the covers and factorizations on its first call (one thread),
-    then farthest-point landmarks along the surface neighbours (:func:`gegnn.fields.landmarks.graph_farthest_points`)
+    :func:`cloud_landmark_fields` from it: the covers and factorizations (or the glued triangles) on its
+    first call (one thread), then farthest-point landmarks along the surface neighbours (:func:`gegnn.fields.landmarks.graph_farthest_points`)
     and their fields all together, on torch's threads."""
     n_parts = int(part.max()) + 1
     groups = label_groups(part, n_parts)
