@@ -272,7 +272,7 @@ def lower_bound_table(names, ks=(16, 32, 64, 128, 256), n_sources=20):
 
 def cloud_lower_bound_table(names, ks=(64, 128, 256), n_sources=20):
     from gegnn.fields.cloud_heat import local_triangulations
-    from gegnn.fields.cloud_vsp import CloudVirtualSources
+    from gegnn.fields.cloud_vsp import CloudVirtualSources, agreed_soup
     from gegnn.fields.landmarks import _vsp_field, graph_farthest_points
     from gegnn.fields.pointcloud import cloud_graph, cloud_landmark_solver, surface_neighbors
 
@@ -293,8 +293,7 @@ def cloud_lower_bound_table(names, ks=(64, 128, 256), n_sources=20):
             rows[label] = CloudVirtualSources(v, triangles, gluing).distances(landmarks)
             seconds.append(time.perf_counter() - t)
             t = time.perf_counter()
-        _, first, agree = np.unique(np.sort(triangles, axis=1), axis=0, return_index=True, return_counts=True)
-        soup = triangles[first[np.argsort(-agree, kind="stable")]]  # most agreed first: kept on their edges
+        soup = agreed_soup(triangles)  # most agreed first: kept on their edges by manifold_copy
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # the soup's non-manifold edges, expected
             rows["virtual sources on a manifold copy of the local triangles"] = _vsp_field(v, soup, 0.5, max(ks))(

@@ -40,9 +40,17 @@ import numpy as np
 
 from .heat import tufted_cover
 
-__all__ = ["CloudVirtualSources", "paired_mesh", "cover_mesh", "own_excess", "GLUINGS"]
+__all__ = ["CloudVirtualSources", "agreed_soup", "paired_mesh", "cover_mesh", "own_excess", "GLUINGS"]
 
 GLUINGS = ("pairs", "cover")
+
+
+def agreed_soup(triangles: np.ndarray) -> np.ndarray:
+    """Each distinct triangle of the points' local triangulations once (F, 3), those that more points'
+    triangulations emit first (a stable order among equals)."""
+    triangles = np.asarray(triangles, dtype=np.int64)
+    _, first, agree = np.unique(np.sort(triangles, axis=1), axis=0, return_index=True, return_counts=True)
+    return triangles[first[np.argsort(-agree, kind="stable")]]
 
 
 def paired_mesh(points: np.ndarray, soup: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -103,9 +111,7 @@ class CloudVirtualSources:
             raise ValueError(f"gluing must be one of {', '.join(GLUINGS)}, got {gluing!r}")
         points = np.ascontiguousarray(points, dtype=np.float64)
         triangles = np.asarray(triangles, dtype=np.int64)
-        _, first, agree = np.unique(np.sort(triangles, axis=1), axis=0, return_index=True, return_counts=True)
-        soup = triangles[first[np.argsort(-agree, kind="stable")]]  # most agreed first
-        faces, twins = (paired_mesh if gluing == "pairs" else cover_mesh)(points, soup)
+        faces, twins = (paired_mesh if gluing == "pairs" else cover_mesh)(points, agreed_soup(triangles))
         self.n_points = len(points)
         self._solver = ApproximateGeodesicSolver(points, faces, twins=twins, excess=own_excess(points, triangles))
 
