@@ -203,7 +203,7 @@ struct Workspace {
     Buckets buckets;
     Heap heap;
     int64_t processed = 0;
-    std::vector<int> queue;       // a glued soup's relaxation along its edges
+    std::vector<int> queue, next;  // a glued soup's relaxation along its edges: this round's vertices, the next's
     std::vector<char> queued;
 };
 
@@ -323,58 +323,57 @@ private:
     std::vector<int> edge_start_, edge_to_;  // a glued soup's: per vertex its neighbours along edges (CSR)
     std::vector<double> edge_length_;
 
-    // A glued soup's edges: each vertex's neighbours and the lengths to them.
+    // A glued soup's edges: each vertex's neighbours and the lengths to them (a half-edge's own length in its
+    // face's frame: the faces of an edge agree on it to rounding; the last face's is kept).
     void build_edges() {
-        std::vector<std::pair<int, int>> pairs;
-        pairs.reserve(6 * m_);
-        for (int h = 0; h < 3 * m_; ++h) {
-            const int a = F_[h], b = F_[h % 3 == 2 ? h - 2 : h + 1];
-            pairs.push_back({a, b}), pairs.push_back({b, a});
+        struct Edge {
+            int from, to;
+            double length;
+        };
+        std::vector<Edge> edges;
+        edges.reserve(6 * m_);
+        for (int h = 3 * m_ - 1; h >= 0; --h) {  // the last face first: it stays first among equal edges
+            const int f = h / 3, k = h % 3, a = F_[h], b = F_[k == 2 ? h - 2 : h + 1];
+            const Point p = corner(f, k), q = corner(f, (k + 1) % 3);
+            const double l = norm(q.x - p.x, q.y - p.y);
+            edges.push_back({a, b, l}), edges.push_back({b, a, l});
         }
-        std::sort(pairs.begin(), pairs.end());
-        pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
+        auto key = [](const Edge& e) { return std::pair{e.from, e.to}; };
+        std::stable_sort(edges.begin(), edges.end(), [&](const Edge& x, const Edge& y) { return key(x) < key(y); });
+        edges.erase(std::unique(edges.begin(), edges.end(), [&](const Edge& x, const Edge& y) { return key(x) == key(y); }),
+                    edges.end());
         edge_start_.assign(n_ + 1, 0);
-        edge_to_.resize(pairs.size());
-        edge_length_.resize(pairs.size());
-        for (size_t i = 0; i < pairs.size(); ++i) {
-            ++edge_start_[pairs[i].first + 1];
-            edge_to_[i] = pairs[i].second;
+        edge_to_.resize(edges.size());
+        edge_length_.resize(edges.size());
+        for (size_t i = 0; i < edges.size(); ++i) {
+            ++edge_start_[edges[i].from + 1];
+            edge_to_[i] = edges[i].to, edge_length_[i] = edges[i].length;
         }
         for (int64_t v = 0; v < n_; ++v) edge_start_[v + 1] += edge_start_[v];
-        // the lengths, from a face's frame: the half-edge's own length
-        for (int h = 0; h < 3 * m_; ++h) {
-            const int f = h / 3, k = h % 3;
-            const Point p = corner(f, k), q = corner(f, (k + 1) % 3);
-            const int a = F_[h], b = F_[k == 2 ? h - 2 : h + 1];
-            const double l = norm(q.x - p.x, q.y - p.y);
-            for (const auto [u, v] : {std::pair{a, b}, std::pair{b, a}})
-                for (int i = edge_start_[u]; i < edge_start_[u + 1]; ++i)
-                    if (edge_to_[i] == v) edge_length_[i] = l;
-        }
     }
 
-    // d_v <= d_u + |uv| over a glued soup's edges (a shortest-path queue from every vertex): edges left
-    // unglued can leave a vertex reached only the long way round, its straight neighbours nearer.
+    // d_v <= d_u + |uv| over a glued soup's edges (Bellman-Ford rounds from every vertex, then from those that
+    // moved, until none does): edges left unglued can leave a vertex reached only the long way round, its
+    // straight neighbours nearer.
     void relax_along_edges(double* d, Workspace& w) const {
-        w.queue.clear();
-        w.queued.assign(n_, 1);
-        for (int v = 0; v < n_; ++v) w.queue.push_back(v);
-        for (size_t head = 0; head < w.queue.size(); ++head) {
-            const int u = w.queue[head];
-            w.queued[u] = 0;
-            if (!(d[u] < INF)) continue;
-            for (int i = edge_start_[u]; i < edge_start_[u + 1]; ++i) {
-                const int v = edge_to_[i];
-                const double via = d[u] + edge_length_[i];
-                if (via < d[v]) {
-                    d[v] = via;
-                    if (!w.queued[v]) w.queued[v] = 1, w.queue.push_back(v);
+        w.queue.resize(n_);
+        for (int v = 0; v < n_; ++v) w.queue[v] = v;
+        w.queued.assign(n_, 0);
+        while (!w.queue.empty()) {
+            w.next.clear();
+            for (const int u : w.queue) {
+                w.queued[u] = 0;
+                if (!(d[u] < INF)) continue;
+                for (int i = edge_start_[u]; i < edge_start_[u + 1]; ++i) {
+                    const int v = edge_to_[i];
+                    const double via = d[u] + edge_length_[i];
+                    if (via < d[v]) {
+                        d[v] = via;
+                        if (!w.queued[v]) w.queued[v] = 1, w.next.push_back(v);
+                    }
                 }
             }
-            if (head > static_cast<size_t>(n_) && head * 2 > w.queue.size()) {  // keep the queue's memory bounded
-                w.queue.erase(w.queue.begin(), w.queue.begin() + static_cast<std::ptrdiff_t>(head) + 1);
-                head = static_cast<size_t>(-1);
-            }
+            std::swap(w.queue, w.next);
         }
     }
     double mean_edge_ = 1.0;
