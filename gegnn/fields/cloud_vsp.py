@@ -15,9 +15,10 @@ glued pair of half-edges, so it runs on the soup as given with the gluing explic
 
 Measured, the landmark bound at K = 256 over 20 sources x every point of six meshes' vertices taken as clouds
 (``benchmarks/bench_field_solver.py --cloud-lower-bound``, docs/notes/pointclouds-lab.md): pairs 2.65%, cover
-2.59%, the cloud heat method 3.67% (exact fields 0.40%); landmark-v3's weights on the 19 validation clouds
-(``gegnn eval``, all stored pairs): pairs 2.98%, cover 3.09% (pairs better on 17 of 19; landmark-v2's weights
-on the cloud heat method's fields: 3.47%); 256 fields at 5k points 0.36 s (pairs), 1.03 s (cover), 0.23 s
+2.59%, the cloud heat method 3.68% (exact fields 0.40%); the fields themselves against the exact ones at the
+same 256 landmarks: pairs 2.39% (0.26% on horse, 0.27% on max, 5.98% on penguin), cover 2.48%, the heat
+method 3.55%; landmark-v3's weights on the 19 validation clouds (``gegnn eval``, all stored pairs): pairs
+2.98%, cover 3.09% (pairs better on 17 of 19; landmark-v2's weights on the cloud heat method's fields: 3.47%); 256 fields at 5k points 0.36 s (pairs), 1.03 s (cover), 0.23 s
 (the heat method), one core beside a training run. Setting the soup's non-manifold triangles aside instead
 (a manifold copy) leaves holes that paths go around: 4.35%.
 
