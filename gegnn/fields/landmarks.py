@@ -178,22 +178,21 @@ def _vsp_field(vertices, faces, t_coef: float, fields: int):
         d = solver.distances(np.asarray(sources, dtype=np.int64), threads=1).T  # (N', S)
         out = d[:n].copy()
         np.minimum.at(out, origin[n:], d[n:])
-        return _along_edges(out, vertices, faces)
+        return _along_edges(out, vertices, unique_edges(faces))
     return solve
 
 
-def _along_edges(fields: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+def _along_edges(fields: np.ndarray, vertices: np.ndarray, edges: np.ndarray) -> np.ndarray:
     """``fields`` (N, S) where its solver left a vertex unreached (``inf``: cut off by a manifold copy's
-    set-aside faces or split vertices; a connected part's vertices are all reachable along its edges) given
-    the shortest continuation along the mesh's edges from the reached ones (Bellman-Ford on the edges that
-    touch them, until nothing changes: a few rounds, as such islands are small); reached values stay. Left
-    at the largest finite value instead, such vertices would be the next landmarks of farthest-point
-    sampling."""
+    set-aside faces or split vertices, or a cloud's local triangles; a connected part's vertices are all
+    reachable along its ``edges`` (E, 2)) given the shortest continuation along the edges from the reached
+    ones (Bellman-Ford on the edges that touch them, until nothing changes: a few rounds, as such islands
+    are small); reached values stay. Left at the largest finite value instead, such vertices would be the
+    next landmarks of farthest-point sampling."""
     todo = ~np.isfinite(fields)
     rows = todo.any(axis=1)
     if not rows.any():
         return fields
-    edges = unique_edges(faces)
     a, b = edges[rows[edges].any(axis=1)].T
     w = np.linalg.norm(vertices[a] - vertices[b], axis=1)[:, None]
     for _ in range(len(fields)):

@@ -39,7 +39,7 @@ import numpy as np
 from geodata.mesh import label_groups
 
 from .. import threads
-from .landmarks import LandmarkFields, graph_farthest_points, landmark_columns
+from .landmarks import LandmarkFields, _along_edges, graph_farthest_points, landmark_columns
 
 __all__ = ["CloudGraph", "cloud_graph", "mls_project", "surface_neighbors", "knn_edges", "graph_parts",
            "pca_normals", "unoriented_normals", "orient_normals", "cloud_landmark_fields", "cloud_landmark_solver",
@@ -301,12 +301,15 @@ def _cloud_field(points: np.ndarray, t_coef: float, normals: np.ndarray | None =
         triangles = local_triangulations(points, neighbors)
     except ValueError:
         triangles = None
+    edges = knn_edges(points, HEAT_K)[0] if neighbors is None else pairs
 
     def build():
         try:
             if triangles is not None and solver == "vsp":  # the sources on all threads (the same fields)
                 fields = CloudVirtualSources(points, triangles[1])
-                return lambda sources: fields.distances(sources, threads=threads.count())
+                # a point the triangles leave apart from its part (the graph joins it): along the graph
+                return lambda sources: _along_edges(fields.distances(sources, threads=threads.count()), points,
+                                                    edges)
             if triangles is not None:
                 return CloudHeatDistance(points, t_coef, neighbors, triangles).distances
         except ValueError:
@@ -314,4 +317,4 @@ def _cloud_field(points: np.ndarray, t_coef: float, normals: np.ndarray | None =
         import potpourri3d as pp3d
         heat = pp3d.PointCloudHeatSolver(points, t_coef=t_coef)
         return lambda sources: np.stack([heat.compute_distance(int(s)) for s in sources], axis=1)
-    return (knn_edges(points, HEAT_K)[0] if neighbors is None else pairs), build
+    return edges, build

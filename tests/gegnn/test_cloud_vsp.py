@@ -17,6 +17,7 @@ from gegnn.fields.cloud_heat import local_triangulations
 from gegnn.fields.cloud_vsp import CloudVirtualSources, cover_mesh, own_excess, paired_mesh
 from gegnn.fields.pointcloud import cloud_landmark_fields, surface_neighbors
 from geodata.approximate_geodesic import ApproximateGeodesicSolver, approximate_geodesic_distances
+from geodata.mesh import unique_edges
 
 
 def mesh_excess(v, f):
@@ -99,3 +100,24 @@ def test_fields_are_relaxed_along_edges_the_same_on_any_thread_count_and_bad_twi
     bad[0], bad[1] = bad[1], bad[0]
     with pytest.raises(ValueError, match="twins"):
         ApproximateGeodesicSolver(mesh.vertices, faces, twins=bad)
+
+
+def test_points_the_triangles_leave_apart_continue_along_the_graph():
+    """Two patches of a plane whose triangles do not meet, one graph edge between them: the fields reach the
+    second patch across that edge (landmarks._along_edges, as _cloud_field applies it), Euclidean on each."""
+    from gegnn.fields.landmarks import _along_edges
+
+    mesh = grid(8)
+    v, f = mesh.vertices, mesh.faces
+    left = (v[f][:, :, 0] < 0.5).all(axis=1)
+    right = (v[f][:, :, 0] > 0.5).all(axis=1)  # the column of triangles between them is left out
+    d = CloudVirtualSources(v, np.vstack([f[left], f[right]])).distances([0])
+    apart = ~np.isfinite(d[:, 0])
+    assert apart.any() and (v[apart, 0] > 0.5).all()
+    bridge = np.array([[int(np.argmin(np.where(v[:, 0] < 0.5, np.abs(v[:, 0] - 0.5) + v[:, 1], np.inf))),
+                        int(np.argmin(np.where(v[:, 0] > 0.5, np.abs(v[:, 0] - 0.5) + v[:, 1], np.inf)))]])
+    continued = _along_edges(d.copy(), v, np.vstack([unique_edges(np.vstack([f[left], f[right]])), bridge]))
+    assert np.isfinite(continued).all()
+    np.testing.assert_array_equal(continued[~apart], d[~apart])  # reached values stay
+    a, b = bridge[0]
+    np.testing.assert_allclose(continued[b, 0], d[a, 0] + np.linalg.norm(v[a] - v[b]))
