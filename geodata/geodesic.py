@@ -141,7 +141,8 @@ def sample_sources(labels: np.ndarray, n_pairs: int, rng: np.random.Generator) -
 
 def exact_geodesic_pairs(mesh: Mesh, n_pairs: int, rng: np.random.Generator, backend: str = "vtp"
                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Pairs (P, 2) uint32 and exact distances (P,) float32: sources x every other vertex of their component.
+    """Pairs (P, 2) uint32 and exact distances (P,) float32 (approximate with ``backend="vsp"``): sources x
+    every other vertex of their component.
 
     Sources come in the order of `sample_sources`. Kirsanov's code, rarely, leaves a vertex unreached
     from one particular source of a clean mesh (libigl/libigl#1013; inf from gdist, 0 from libigl); from
