@@ -94,6 +94,27 @@ def test_a_damaged_subgroup_zip_is_to_do_again(tmp_path):
     assert store.remove_damaged(tmp_path, "b", "biharmonic") and not store.remove_damaged(tmp_path, "a", "biharmonic")
 
 
+def test_a_damaged_mesh_is_a_failure_of_the_later_stage_and_the_others_go_on(tmp_path):
+    """`geodata biharmonic` over a store whose first mesh's zip is empty: that mesh's subgroup is recorded as failed
+    with the reason, the other meshes are done, a rerun and --check exit 0 and count it failed, info lists it;
+    once prepare has redone the mesh, the stage does it."""
+    raw, out = prepared(tmp_path, {f"{name}.obj": ball_obj(z) for name, z in (("a", 1.0), ("b", 0.5), ("c", 0.7))})
+    damaged, *others = sorted(store.list_meshes(out))
+    store.mesh_file(out, damaged).write_bytes(b"")
+    bh = ["biharmonic", out, "--pairs", "300"]
+    assert "summary: 2 ok, 1 failed this run" in run(*bh).output
+    assert all("biharmonic" in store.list_meshes(out)[m] for m in others)
+    failure = store.list_failures(out)[f"{damaged}.biharmonic"]
+    assert failure["stage"] == "damaged mesh" and failure["error"].startswith("empty file")
+    assert "0 to do, 2 already done, 1 failed before" in run(*bh).output
+    assert "2 done, 1 failed, 0 pending" in run(*bh, "--check").output
+    info = run("info", out).output
+    assert "biharmonic: 2 ok, 1 failed" in info and f"{damaged} (biharmonic)  [damaged mesh]  empty file" in info
+    run("prepare", raw, out, *ARGS)
+    assert "1 to do, 2 already done, 0 failed before" in run(*bh).output
+    assert store.list_failures(out) == {} and "biharmonic: 3 ok, 0 failed" in run("info", out).output
+
+
 def test_an_input_rewritten_in_place_with_its_size_and_mtime_is_hashed_again(tmp_path):
     """A generated OBJ keeps its size, `cp -p`/`touch -r`/`rsync -t` its mtime: the rerun still sees the new bytes
     (the file's ctime and inode changed), prepares them and records their hash."""
