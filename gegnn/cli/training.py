@@ -29,7 +29,7 @@ def _workers(ctx, param, value):
 
 
 def _init(ctx, param, value):
-    """--init: a checkpoint file, a shipped model's name, or none (from scratch, with --model)."""
+    """--init: a checkpoint file, a shipped model's name, or none (from scratch, without --model)."""
     if value is None or value == "none" or value in PRETRAINED or Path(value).is_file():
         return None if value == "none" else value
     raise click.BadParameter(f"{value}: no such file, and no shipped model of that name ({', '.join(PRETRAINED)})")
@@ -103,7 +103,7 @@ def _blocks(ctx, param, value):
 @click.option("--init", "init_ckpt", callback=_init, metavar="CKPT|NAME|none",
               help="Start from these weights: a checkpoint file, or a shipped model's name "
                    f"({', '.join(PRETRAINED)}). With --model the default is that model's own weights; none: "
-                   "from scratch.")
+                   "from scratch (without --model: a preset's recipe has several runs, and the error names them).")
 @click.option("--channels", default=256, show_default=True)
 @click.option("--blocks", callback=_blocks, help="ResBlocks per level, encoder = decoder [2,3,3,3,2].")
 @click.option("--aggr", type=click.Choice(["max", "mean", "sum"]), default="max", show_default=True)
@@ -155,7 +155,10 @@ def train(run_dir, no_rotate, preset_name, init_ckpt, channels, blocks, aggr, no
 
     given = _given(click.get_current_context())
     if preset_name:
-        chosen = preset(preset_name, "default" if "init_ckpt" not in given else init_ckpt)
+        try:
+            chosen = preset(preset_name, "default" if "init_ckpt" not in given else init_ckpt)
+        except ValueError as exc:  # from scratch: the recipe's command, in one line
+            raise click.ClickException(str(exc)) from None
         options.update({k: v for k, v in chosen.schedule.items() if k not in given})
         init_ckpt = chosen.init
     # The other options are TrainConfig's fields by name (store, epochs, ..., deterministic).

@@ -89,10 +89,12 @@ class StepClock:
     def _log_estimate(self, step_s: float, timed: str) -> None:
         epoch_s = step_s * self.steps_per_epoch
         run_s = epoch_s * self.epochs_left
+        # a preset's run is a fine-tune (:func:`gegnn.training.presets.preset`): its recipe took several runs
+        which = f"this fine-tune alone, not preset {self.cfg.model}'s whole recipe; " if self.cfg.model else ""
         self.log.info(f"estimate: {step_s:.2f} s a step ({timed} timed) -> ~{readable_seconds(epoch_s)} an epoch "
                       f"of {self.steps_per_epoch} steps, "
-                      f"~{readable_seconds(run_s)} for the run's {self.epochs_left} epoch(s) (validation not "
-                      "included)")
+                      f"~{readable_seconds(run_s)} for the run's {self.epochs_left} epoch(s) ({which}validation "
+                      "not included)")
         hints = []
         if not self.cfg.model and self.config.channels > 64 and not self.cfg.init:
             hints.append(f"--model landmark trains the shipped default's 64-channel network (~{PRESET_SPEEDUP}x "

@@ -2,6 +2,7 @@
 and recorded schedule, fine-tuned from its weights; explicit options override it; the log says what a run is and
 what it will cost."""
 import logging
+from pathlib import Path
 
 import pytest
 import torch
@@ -11,10 +12,10 @@ import gegnn.training.loop as gtrain
 from gegnn import GeGnn
 from gegnn.checkpoint import load_checkpoint, read_config
 from gegnn.cli import main
-from gegnn.model import pretrained_file
+from gegnn.model import PRETRAINED, pretrained_file
 from gegnn.training.estimate import StepClock, readable_seconds
 from gegnn.training.loop import TrainConfig
-from gegnn.training.presets import PRESETS, checkpoint_file, preset
+from gegnn.training.presets import PRESETS, RECIPES, checkpoint_file, preset, recipe_command
 
 
 def resolved(store, run, *args):
@@ -44,19 +45,32 @@ def test_a_presets_model_is_the_shipped_models_config(name, tiny_store, tmp_path
     cfg, model_cfg = resolved(tiny_store, tmp_path / "run", "--model", name)
     assert cfg.model == name and cfg.init == name
     assert built(cfg, model_cfg).config == shipped_config(name)
-    # and from scratch (--init none) the same architecture, built from the preset's config alone
-    cfg, model_cfg = resolved(tiny_store, tmp_path / "run", "--model", name, "--init", "none")
-    assert cfg.init is None and built(cfg, model_cfg).config == shipped_config(name)
+
+
+@pytest.mark.parametrize("name", PRESETS)
+def test_a_preset_from_scratch_is_refused_with_the_command_of_its_whole_recipe(name, tiny_store, tmp_path):
+    """The recorded schedule is the shipped file's last run (a fine-tune): on random weights it is not the recipe.
+    The one-line refusal names every script of the recipe, each of which exists, the last exporting the shipped
+    file itself."""
+    result = CliRunner().invoke(main, ["train", tiny_store, "--run", str(tmp_path / "r"), "--model", name,
+                                       "--init", "none"])
+    assert result.exit_code == 1 and not (tmp_path / "r").exists()
+    assert result.output.count("\n") == 1 and result.output.endswith(f"{recipe_command(name)}\n")
+    root = Path(__file__).parents[2]
+    assert all((root / script).is_file() for script in RECIPES[name])
+    last = (root / RECIPES[name][-1]).read_text()
+    assert "gegnn export" in last and PRETRAINED[name] in last
+    with pytest.raises(ValueError, match="several runs"):
+        preset(name, None)
 
 
 def test_a_presets_schedule_is_the_recorded_one_gentled_for_a_fine_tune(tiny_store, tmp_path):
     recorded = load_checkpoint(checkpoint_file("paper")).metadata["train_config"]
-    cfg, _ = resolved(tiny_store, tmp_path / "run", "--model", "paper", "--init", "none")
-    assert (cfg.epochs, cfg.batch_size, cfg.lr, cfg.warmup_epochs, cfg.clip_grad, cfg.pairs_per_mesh) == \
-        (recorded["epochs"], recorded["batch_size"], recorded["lr"], recorded["warmup_epochs"],
-         recorded["clip_grad"], recorded["pairs_per_mesh"]) == (27, 4, 2e-3, 0.5, 1.0, 20000)
     cfg, _ = resolved(tiny_store, tmp_path / "run", "--model", "paper")  # fine-tuned from its own weights
-    assert cfg.lr == 1e-4 and cfg.warmup_epochs == 0.5 and cfg.init == "paper"
+    assert (cfg.epochs, cfg.batch_size, cfg.clip_grad, cfg.pairs_per_mesh, recorded["lr"]) == \
+        (recorded["epochs"], recorded["batch_size"], recorded["clip_grad"], recorded["pairs_per_mesh"], 2e-3) == \
+        (27, 4, 1.0, 20000, 2e-3)
+    assert cfg.lr == 1e-4 and cfg.warmup_epochs == recorded["warmup_epochs"] == 0.5 and cfg.init == "paper"
     landmark = load_checkpoint(checkpoint_file("landmark")).metadata["train_config"]
     assert landmark["decoder_warmup"] == 20000  # trained a decoder new to K = 256 ...
     assert preset("landmark").schedule["decoder_warmup"] == 0  # ... which its own fine-tune has already
@@ -83,8 +97,6 @@ def test_an_explicit_option_overrides_the_preset(tiny_store, tmp_path):
     assert model.config.landmarks == 8 and model.config.channels == 64
     v1 = GeGnn.pretrained("landmark-v1").state_dict()  # its decoder's weights do not depend on K
     assert all(torch.equal(model.state_dict()[k], v1[k]) for k in v1)
-    cfg, model_cfg = resolved(tiny_store, tmp_path / "run", "--model", "landmark", "--init", "none", "--channels", "16")
-    assert built(cfg, model_cfg).config.channels == 16
 
 
 def test_plain_train_is_the_paper_network_with_the_old_defaults(tiny_store, tmp_path):
@@ -126,12 +138,14 @@ def test_the_estimate_hints_at_a_preset_and_a_gpu_where_they_would_be_much_faste
     assert "4.00 s a step (steps 2-4 timed) -> ~16.7 min an epoch of 250 steps, ~27.8 h for the run's 100 epoch(s)" in text
     assert "hint: --model landmark" in text and "hint: one GPU takes ~0.09 s a step at batch 4" in text
     assert "this run in ~37.5 min" in text  # 25,000 steps of 0.09 s
+    assert "epoch(s) (validation not included)" in text  # no preset: the run is the whole of it
     caplog.clear()
     small = TrainConfig(store="s", run="r", epochs=1, batch_size=4, model="landmark", init="landmark")
     clock = StepClock(log, small, shipped_config("landmark"), torch.device("cpu"), 10, 1)
     with caplog.at_level(logging.INFO, logger="test_presets"):
         clock._log_estimate(step_s=1.0, timed="steps 2-4")
     assert "estimate" in caplog.text and "hint" not in caplog.text
+    assert "(this fine-tune alone, not preset landmark's whole recipe; validation not included)" in caplog.text
     assert [readable_seconds(s) for s in (0.4, 40, 600, 7200, 86400 * 3)] == [
         "0.4 s", "40 s", "10.0 min", "2.0 h", "3.0 days"]
 
