@@ -16,7 +16,8 @@ of NumPy files, one a (fields, mesh, draw), read back per sample (a few millisec
 
 ``<spec>`` (:attr:`FieldSpec.name`) is ``k<K>-rounds16`` for a mesh's heat-method landmark fields (``k<K>-rounds16-vsp``
 by virtual source propagation), ``k<K>-cloud<k>-surface2``
-for a point cloud's and ``spectral<m>`` for spectral codes. ``key`` is a hash of
+for a point cloud's and ``spectral<m>`` for spectral codes, then ``-v<n>`` where the values of that kind of
+field are in their version n > 1 (:data:`FIELD_VERSIONS`). ``key`` is a hash of
 the mesh's vertices and faces, not its id: an id names the raw file, and two stores made from one file
 with other settings hold other meshes. So one cache can serve several runs and stores
 (``gegnn train --field-cache DIR``), and a killed fill loses only the fields in flight.
@@ -50,10 +51,21 @@ from geodata.store import publish, temporary_name
 from .landmarks import FPS_BATCH, landmark_solver
 from .spectral import spectral_codes
 
-__all__ = ["FieldSpec", "FieldCache", "estimate_fill", "readable", "LANDMARK_DRAWS"]
+__all__ = ["FieldSpec", "FieldCache", "estimate_fill", "readable", "LANDMARK_DRAWS", "FIELD_VERSIONS"]
 
 FORMAT = 2  # 1: a zarr group of float32 arrays, each with a "complete" attribute (before 2026-11-26)
 LANDMARK_DRAWS = 4  # landmark choices per training mesh (augmentation; each computed once, in the cache)
+# The version of each kind of field's values, part of its cache folder's name (FieldSpec.name), so that a cache
+# shared with another release never serves fields computed otherwise. Bump a kind's version whenever its values
+# change (its solver, the value of a point it leaves unreached, the landmark choice); at 1 the name carries none.
+FIELD_VERSIONS = {
+    "heat": 1,        # a mesh's landmark fields by the heat method (gegnn.fields.landmarks)
+    "vsp": 2,         # ... by virtual sources (geodata.approximate_geodesic); 2: its saddle-gate rule (after 0.3.2)
+    "cloud-heat": 1,  # a point cloud's by the heat method (gegnn.fields.cloud_heat)
+    "cloud-vsp": 2,   # ... by virtual sources on its local triangles (gegnn.fields.cloud_vsp); 2 (after 0.3.2): a
+                      # point they leave apart continued along the graph, where it was inf; the saddle-gate rule
+    "spectral": 1,    # spectral codes (gegnn.fields.spectral)
+}
 
 
 @dataclass(frozen=True)
@@ -94,7 +106,19 @@ class FieldSpec:
         return np.float16 if self.kind == "landmark" else np.float32
 
     @property
+    def values(self) -> str:
+        """The kind of field values, a key of :data:`FIELD_VERSIONS`."""
+        if self.kind == "spectral":
+            return "spectral"
+        return ("cloud-" if self.cloud else "") + self.solver
+
+    @property
     def name(self) -> str:
+        """The cache folder of these fields: what they are, then their values' version where it is past 1."""
+        version = FIELD_VERSIONS[self.values]
+        return self._what() + (f"-v{version}" if version > 1 else "")
+
+    def _what(self) -> str:
         if self.kind == "spectral":
             return f"spectral{self.size}"
         # "-surface2": point-cloud fields on surface_neighbors with twice-fitted cone normals (since

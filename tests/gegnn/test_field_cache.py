@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from gegnn_stores import ellipsoid, flat_grid, small_config
 
-from gegnn.fields.cache import LANDMARK_DRAWS, FieldCache, FieldSpec
+from gegnn.fields.cache import FIELD_VERSIONS, LANDMARK_DRAWS, FieldCache, FieldSpec
 from geodata.store import geometry_key
 from gegnn.fields.landmarks import landmark_fields
 from gegnn.fields.spectral import spectral_codes
@@ -44,11 +44,34 @@ def test_specs_name_their_fields_and_read_a_models_config():
     # fields by virtual source propagation: their own folder, so heat and vsp fields never mix, a mesh's and
     # a cloud's (gegnn.fields.cloud_vsp) alike
     assert FieldSpec.of(small_config(landmarks=64, landmark_fields="vsp")) == FieldSpec("landmark", 64, 0, "vsp")
-    assert FieldSpec("landmark", 64, 0, "vsp").name == "k64-rounds16-vsp"
+    assert FieldSpec("landmark", 64, 0, "vsp").name == "k64-rounds16-vsp-v2"
     assert FieldSpec.of(small_config(landmarks=64, points=8, landmark_fields="vsp")) == FieldSpec("landmark", 64, 8, "vsp")
-    assert FieldSpec("landmark", 64, 8, "vsp").name == "k64-cloud8-surface2-vsp"
+    assert FieldSpec("landmark", 64, 8, "vsp").name == "k64-cloud8-surface2-vsp-v2"
     with pytest.raises(ValueError, match="landmark_fields must be one of heat, vsp"):
         small_config(landmarks=64, landmark_fields="exact")
+
+
+def test_fields_of_another_version_of_their_values_are_never_served(tmp_path, monkeypatch):
+    """Each kind of field names the version of its values: the vsp fields of 0.3.2 (before the saddle-gate rule,
+    and a cloud's unreached points at inf) are not read as today's, and a bump of one kind's version leaves the
+    entries of the others served."""
+    import gegnn.fields.cache as cache_module
+
+    specs = {"heat": FieldSpec("landmark", 3), "vsp": FieldSpec("landmark", 3, 0, "vsp"),
+             "cloud-heat": FieldSpec("landmark", 3, 8), "cloud-vsp": FieldSpec("landmark", 3, 8, "vsp"),
+             "spectral": FieldSpec("spectral", 3)}
+    assert {spec.values for spec in specs.values()} == set(FIELD_VERSIONS)
+    assert (FIELD_VERSIONS["vsp"], FIELD_VERSIONS["cloud-vsp"]) >= (2, 2)  # bumped since 0.3.2's names
+    assert "k3-rounds16-vsp" not in [spec.name for spec in specs.values()]
+    assert "k3-cloud8-surface2-vsp" not in [spec.name for spec in specs.values()]
+    fields = np.arange(16, dtype=np.float32).reshape(4, 4)
+    for spec in specs.values():
+        assert FieldCache(tmp_path, spec).put("mesh", 0, fields[:, :spec.columns])
+    monkeypatch.setitem(cache_module.FIELD_VERSIONS, "vsp", FIELD_VERSIONS["vsp"] + 1)  # the values change
+    assert FieldCache(tmp_path, specs["vsp"]).get("mesh", 0) is None
+    assert specs["vsp"].name.endswith(f"-v{FIELD_VERSIONS['vsp']}")
+    for kind in ("heat", "cloud-heat", "cloud-vsp", "spectral"):
+        np.testing.assert_array_equal(FieldCache(tmp_path, specs[kind]).get("mesh", 0), fields[:, :specs[kind].columns])
 
 
 def test_a_spec_computes_the_fields_it_names():
