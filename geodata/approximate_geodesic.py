@@ -52,13 +52,16 @@ class ApproximateGeodesicSolver:
         excess: (N,) optional: each vertex's angle excess for the gates, where its faces' corner angles
             (less 2 pi, the default) do not give it: a cloud's local triangulations overlap, a tufted cover
             counts each corner twice.
+        saddle: the angle excess (radians) from which a vertex is a gate; the default 1e-6 (above
+            rounding): every saddle vertex. A cloud's soup, whose excess comes from overlapping fans, is
+            solved with 0.05.
 
     Raises:
         ValueError: naming what is wrong with the mesh (shapes, non-finite coordinates, indices out of
             range, non-manifold edges or vertices, twins not glued back or joining other vertices).
     """
 
-    def __init__(self, vertices, faces, twins=None, excess=None):
+    def __init__(self, vertices, faces, twins=None, excess=None, saddle: float = 1e-6):
         from geodata._virtual_source_geodesic import VirtualSources
 
         vertices, faces = _checked_mesh(vertices, faces)
@@ -66,6 +69,7 @@ class ApproximateGeodesicSolver:
         twins = None if twins is None else np.ascontiguousarray(twins, dtype=np.int64)
         excess = None if excess is None else np.ascontiguousarray(excess, dtype=np.float64)
         self._native = VirtualSources(vertices, faces, twins, excess)  # counts non-manifold edges and vertices
+        self.saddle = float(saddle)
 
     def distances(self, sources, threads: int | None = None) -> np.ndarray:
         """Distances from each source vertex to every vertex.
@@ -87,7 +91,8 @@ class ApproximateGeodesicSolver:
                              f"the mesh has {self.n_vertices} vertices")
         if threads is None:
             threads = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
-        return self._native.distances(np.ascontiguousarray(sources, dtype=np.int64), threads=max(1, int(threads)))
+        return self._native.distances(np.ascontiguousarray(sources, dtype=np.int64), threads=max(1, int(threads)),
+                                      saddle=self.saddle)
 
 
 def approximate_geodesic_distances(vertices, faces, sources, threads: int | None = None) -> np.ndarray:

@@ -188,6 +188,7 @@ struct Source {
     double best;         // its distance at the face's centroid
     int entered;         // the edge it came through, which it is not handed back across (-1: none)
     int gated;           // whether it has gates (Workspace::gates)
+    int detoured = 0;    // whether it was bent around a gate on its way (its distances may come out long)
 };
 
 // Saddle vertices a source's rays passed on their left (l) and right (r), in the face's frame: a point
@@ -205,6 +206,9 @@ struct Workspace {
     int64_t processed = 0;
     std::vector<int> queue, next;  // a glued soup's relaxation along its edges: this round's vertices, the next's
     std::vector<char> queued;
+    std::vector<int> order;  // the faces in the order the queue first gave them out: relax_across_faces' sweeps
+    std::vector<char> ordered;
+    std::vector<char> detoured;  // per vertex: its distance came by a path bent around a gate
 };
 
 class VirtualSources {
@@ -275,15 +279,19 @@ public:
         if (const int64_t pinched = count_pinched())
             throw std::invalid_argument(std::to_string(pinched) +
                                         " non-manifold vertices (their faces form two or more fans)");
+        build_opposites();
     }
 
     int64_t n_vertices() const { return n_; }
 
     template <class Q>
     void distances(int64_t original, double* out, Workspace& w, Q& queue, double bucket, double probe,
-                   double saddle) const {
+                   double saddle, bool relax) const {
         const int source = new_of_old_[original];
         w.d.assign(n_, INF);
+        w.order.clear();
+        w.detoured.assign(n_, 0);
+        if (relax) w.ordered.assign(m_, 0);
         double* d = w.d.data();
         w.faces.assign(m_, Source{0.0, 0.0, INF, INF, -1, 0});
         w.gates.resize(m_);
@@ -305,9 +313,13 @@ public:
             if (!queue.pop(key, f)) break;
             if (key > w.faces[f].best) continue;  // a newer source of f is queued
             ++w.processed;
+            if (relax && !w.ordered[f]) w.ordered[f] = 1, w.order.push_back(f);
             hand_on(f, d, w, queue, probe, saddle);
         }
-        if (!edge_start_.empty()) relax_along_edges(d, w);
+        if (!edge_start_.empty())
+            relax_along_edges(d, w);
+        else if (relax)
+            relax_across_faces(d, w);
         for (int64_t i = 0; i < n_; ++i) out[old_of_new_[i]] = d[i];
     }
 
@@ -375,6 +387,51 @@ private:
             }
             std::swap(w.queue, w.next);
         }
+    }
+    // Gates at every saddle vertex leave no shortcut, but one source a face drops the other families of
+    // paths that cross it: a vertex reached around a gate (detoured) comes out long where a family that
+    // passed the gate's other side would have reached it straight. One sweep over the faces, in the order
+    // the queue first gave them out, takes the surplus back with the triangle update of fast marching
+    // (Kimmel and Sethian 1998) on the faces with a detoured corner: the point S at d(a) from a and d(b)
+    // from b on the far side of the edge ab, and
+    //     d(c) <- |S - c|    where the ray from S to c crosses the segment ab,
+    // a lowered corner counting as detoured for the faces after it. Only there: on a sphere, which has no
+    // saddle, the update everywhere takes the fields 0.25% below exact (they are 0.12% above).
+    void relax_across_faces(double* d, Workspace& w) const {
+        for (const int f : w.order) {
+            if (!(w.detoured[F_[3 * f]] || w.detoured[F_[3 * f + 1]] || w.detoured[F_[3 * f + 2]])) continue;
+            for (int k = 0; k < 3; ++k) {
+                const Opposite& o = opposite_[3 * f + k];
+                const double da = d[F_[3 * f + (k + 1) % 3]], db = d[F_[3 * f + (k + 2) % 3]];
+                if (!(da < INF && db < INF) || !(o.cy > 0.0)) continue;
+                const double x = (da * da - db * db + o.L * o.L) * o.half_inv_L, h2 = da * da - x * x;
+                if (!(h2 > 0.0)) continue;
+                const double y = std::sqrt(h2), at = x + (o.cx - x) * y / (o.cy + y);
+                if (at < 0.0 || at > o.L) continue;
+                const double to_c = norm(o.cx - x, o.cy + y);
+                double& dc = d[F_[3 * f + k]];
+                if (to_c < dc * (1.0 - SETTLED)) dc = to_c, w.detoured[F_[3 * f + k]] = 1;
+            }
+        }
+    }
+    // Each face's corner k seen from the edge opposite it, from corner k + 1 (the origin) to k + 2 (at
+    // (L, 0)): the corner at (cx, cy), cy > 0 (0: a degenerate face, never relaxed).
+    struct Opposite {
+        double L, half_inv_L, cx, cy;
+    };
+    std::vector<Opposite> opposite_;  // per corner 3 f + k (manifold meshes only)
+
+    void build_opposites() {
+        opposite_.assign(3 * m_, Opposite{0.0, 0.0, 0.0, 0.0});
+        for (int64_t f = 0; f < m_; ++f)
+            for (int k = 0; k < 3; ++k) {
+                const Point pa = corner(f, (k + 1) % 3), pb = corner(f, (k + 2) % 3), pc = corner(f, k);
+                const double L = norm(pb.x - pa.x, pb.y - pa.y);
+                if (!(L > 0.0)) continue;
+                const double ux = (pb.x - pa.x) / L, uy = (pb.y - pa.y) / L;  // c is left of a -> b
+                opposite_[3 * f + k] = {L, 0.5 / L, (pc.x - pa.x) * ux + (pc.y - pa.y) * uy,
+                                        ux * (pc.y - pa.y) - uy * (pc.x - pa.x)};
+            }
     }
     double mean_edge_ = 1.0;
 
@@ -447,7 +504,7 @@ private:
                 const double ex = c_x > L ? L : 0.0;
                 to_c = sigma + norm(ex - t.x, t.y) + norm(cx - ex, cy);
             }
-            if (to_c < d[u.vc]) d[u.vc] = to_c;
+            if (to_c < d[u.vc]) d[u.vc] = to_c, w.detoured[u.vc] = c_gate || from.detoured;
             // g's source: S past the gates, with a new gate where the ray to C passes a saddle endpoint;
             // else what the ray to the probe point passes, a gate or an endpoint
             double tie = 1.0;
@@ -479,7 +536,7 @@ private:
                 auto face = [&](Point q) { return Point{a.x + q.x * ex - q.y * ey, a.y + q.x * ey + q.y * ex}; };
                 const Point s = face(t);
                 const bool gated = !std::isnan(gl.x) || !std::isnan(gr.x);
-                to = {s.x, s.y, sigma, at_m, u.kg(), gated};
+                to = {s.x, s.y, sigma, at_m, u.kg(), gated, p_gate || from.detoured};
                 if (gated) {
                     const Point l = face(gl), r = face(gr);
                     w.gates[g] = {l.x, l.y, r.x, r.y};
@@ -623,7 +680,8 @@ struct Choices {
     std::string queue = "buckets";  // or "heap"
     double bucket = 0.5;            // the buckets' width in mean edge lengths
     double probe = 1.0;             // the probe point: 0 the far vertex, 1 the face's centroid
-    double saddle = 0.05;           // the angle excess (radians) from which a vertex is a gate
+    double saddle = 1e-6;           // the angle excess (radians) from which a vertex is a gate (1e-6: every saddle)
+    bool relax = true;              // the fields end with relax_across_faces
 };
 
 // The fields of all sources (one row each), over `threads` threads taking sources in turn; each
@@ -647,9 +705,9 @@ Out solve(const VirtualSources& surface, const Sources& sources, int64_t threads
             Workspace w;
             for (size_t i; (i = next++) < k;) {
                 if (c.queue == "heap")
-                    surface.distances(src[i], out + i * n, w, w.heap, c.bucket, c.probe, c.saddle);
+                    surface.distances(src[i], out + i * n, w, w.heap, c.bucket, c.probe, c.saddle, c.relax);
                 else
-                    surface.distances(src[i], out + i * n, w, w.buckets, c.bucket, c.probe, c.saddle);
+                    surface.distances(src[i], out + i * n, w, w.buckets, c.bucket, c.probe, c.saddle, c.relax);
             }
             processed += w.processed;
         };
@@ -683,14 +741,15 @@ NB_MODULE(_virtual_source_geodesic, m) {
         .def(
             "distances",
             [](const VirtualSources& self, Sources sources, int64_t threads, const std::string& queue, double bucket,
-               double probe, double saddle) {
-                return solve(self, sources, threads, Choices{queue, bucket, probe, saddle}, nullptr);
+               double probe, double saddle, bool relax) {
+                return solve(self, sources, threads, Choices{queue, bucket, probe, saddle, relax}, nullptr);
             },
             nb::arg("sources"), nb::arg("threads") = 1, nb::arg("queue") = "buckets", nb::arg("bucket") = 0.5,
-            nb::arg("probe") = 1.0, nb::arg("saddle") = 0.05,
+            nb::arg("probe") = 1.0, nb::arg("saddle") = 1e-6, nb::arg("relax") = true,
             "Distances (len(sources), N) float64 from each source vertex to every vertex; inf where unreached.\n"
             "queue ('buckets' or 'heap'), bucket (width in mean edge lengths), probe (the test point: 0 the far\n"
-            "vertex, 1 the face's centroid), saddle (the angle excess of a gate, radians): the design choices.")
+            "vertex, 1 the face's centroid), saddle (the angle excess of a gate, radians), relax (the fields end\n"
+            "relaxed across the faces; a glued soup's along its edges whatever it says): the design choices.")
         .def(
             "processed",
             [](const VirtualSources& self, Sources sources) {
