@@ -67,6 +67,7 @@ class TrainConfig:
     workers: int | None = None       # loader processes per rank (0: in the training process; None: auto)
     resume: bool = False
     init: str | None = None
+    init_sha256: str | None = None   # the --init file's, recorded by the run: a name or a path may later hold others
     decoder_warmup: int = 0          # decoder-only steps on frozen network codes before the first epoch
     field_cache: str | None = None  # cache folder of the landmark fields or spectral codes (None: RUN/fields)
     deterministic: bool = False      # torch's deterministic algorithms: bitwise-exact resume on CUDA too
@@ -140,6 +141,9 @@ def train(cfg: TrainConfig, model_config: GeGnnConfig | None = None) -> list[dic
         keeps = RESUME_KEEPS + (("val_store",) if cfg.val_store else ())
         saved = {k: v for k, v in resume.metadata["train_config"].items() if k not in keeps}
         cfg = dataclasses.replace(cfg, **saved)
+    elif cfg.init:  # the weights it starts from, by their bytes
+        init_bytes = Path(checkpoint_file(cfg.init)).read_bytes()
+        cfg = dataclasses.replace(cfg, init_sha256=hashlib.sha256(init_bytes).hexdigest())
     previous = torch.are_deterministic_algorithms_enabled()
     set_deterministic(previous or cfg.deterministic)
     device = pick_device(cfg.device)

@@ -26,6 +26,9 @@ gegnn export "$runs/lm384-v3/best.safetensors" "$runs/gegnn-landmark-v3.safetens
 bash pipelines/landmark/more_landmarks.sh "$data" "$runs" 256 "$weights/gegnn-landmark-v2.safetensors" lm256-v3 vsp
 gegnn export "$runs/lm256-v3/best.safetensors" "$weights/gegnn-landmark-v3.safetensors" --dtype fp16
 gegnn export "$weights/gegnn-landmark-v3.safetensors" "$weights/gegnn-points-v3.safetensors" --neighbors 8
+# Each run records the weights it started from by path and sha256 (train_config init, init_sha256): always a
+# file here, never a shipped model's name, which moves to each new default. Checked on the files just shipped:
+python -m pytest -q tests/gegnn/test_weights_provenance.py -k started_from
 
 python benchmarks/ablation_k.py "$data/val.zarr" "landmark-v3=$weights/gegnn-landmark-v3.safetensors" --record
 python benchmarks/ablation_k.py "$data/val.zarr" "landmark-v2=$weights/gegnn-landmark-v2.safetensors" \

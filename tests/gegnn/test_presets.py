@@ -1,6 +1,7 @@
 """`gegnn train --model NAME` and `--init NAME` (issue 57): a preset is the shipped model's architecture, fields
 and recorded schedule, fine-tuned from its weights; explicit options override it; the log says what a run is and
 what it will cost."""
+import hashlib
 import logging
 from pathlib import Path
 
@@ -126,6 +127,9 @@ def test_the_log_says_model_size_device_and_the_estimate(tiny_store, tmp_path):
     assert "for the run's 2 epoch(s)" in estimate
     assert any(line.startswith("first epoch: ") for line in lines)
     assert lines.index(estimate) < next(i for i, line in enumerate(lines) if line.startswith("epoch 0 "))
+    with pretrained_file("landmark") as path:  # the weights it started from, by their bytes: a name can move
+        started_from = hashlib.sha256(path.read_bytes()).hexdigest()
+    assert load_checkpoint(run / "best.safetensors").metadata["train_config"]["init_sha256"] == started_from
 
 
 def test_the_estimate_hints_at_a_preset_and_a_gpu_where_they_would_be_much_faster(caplog):

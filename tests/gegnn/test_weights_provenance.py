@@ -1,8 +1,13 @@
 """The meshes the shipped weights were trained on travel with them (issue 57): gegnn/weights/TRAINING_MESHES.tsv,
-one row a mesh with its source, commit and licence, in the package beside the weights."""
+one row a mesh with its source, commit and licence, in the package beside the weights; and the weights each
+started from are named by file and hash."""
 import csv
+import hashlib
 from importlib.resources import files
 from pathlib import Path
+
+from gegnn.checkpoint import load_checkpoint
+from gegnn.model import PRETRAINED, pretrained_file
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -38,3 +43,19 @@ def test_the_wheel_takes_it_with_the_weights():
                                                 include=[], src_exclude=[], target_exclude=[], build_dir="build/x",
                                                 mode="default")
     assert "/wheel/gegnn/weights/TRAINING_MESHES.tsv" in mapping.values()
+
+
+def test_the_weights_a_shipped_model_started_from_are_a_file_and_its_hash_not_a_name_that_moves():
+    """landmark-v3 (and its point-cloud twin, the same train_config) started from landmark-v2's file when
+    "landmark" named it: each records that file's path and sha256, which the shipped v2 file matches. No shipped
+    file records a shipped model's name, whose file changes with each default."""
+    recorded = {}
+    for name in PRETRAINED:
+        with pretrained_file(name) as path:
+            recorded[name] = load_checkpoint(path).metadata["train_config"]
+    assert not [name for name, config in recorded.items() if config.get("init") in PRETRAINED]
+    for name in ("landmark", "points"):
+        assert recorded[name]["init"] == "gegnn/weights/gegnn-landmark-v2.safetensors" and recorded[name]["init_sha256"]
+    for name, config in recorded.items():
+        if config.get("init_sha256"):
+            assert hashlib.sha256((ROOT / config["init"]).read_bytes()).hexdigest() == config["init_sha256"], name
