@@ -138,9 +138,9 @@ class GeGnn(nn.Module):
         ``PROXY_ABOVE`` (40,000) vertices is embedded through a proxy of the same surface with ``PROXY_VERTICES``
         (20,000) (``proxy``: ``"auto"``, another vertex count, or None for the mesh itself;
         :mod:`gegnn.queries.proxy`): the network and fields run at the resolution the model knows, every vertex
-        of the mesh gets the code of its closest point on its own connected part's proxy (each part keeps at
-        least ``PART_VERTICES``, or all its own), and all queries answer on the mesh's own
-        vertices. A cloud of more points likewise: a random subset of that size is embedded, and every point
+        of the mesh gets the code of its closest point on its own connected part's proxy (never more vertices in
+        all than the proxy's, however many parts: :func:`gegnn.queries.proxy.part_budget`), and all queries
+        answer on the mesh's own vertices. A cloud of more points likewise: a random subset of that size is embedded, and every point
         gets the blend of its 3 nearest subset points' codes. With more than one torch thread
         (``torch.set_num_threads``) the U-Net runs on a thread of its own while the fields are computed,
         and a cloud's row-wise steps are spread over the threads (:mod:`gegnn.threads`); the result is the

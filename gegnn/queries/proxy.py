@@ -1,15 +1,21 @@
 """A large mesh embedded through a proxy: the same surface with fewer vertices (edge collapse and remesh), embedded
 once; every vertex of the large mesh then gets the code of its closest point on the proxy of its own connected
 part (a blend of the proxy's vertex codes, :meth:`gegnn.queries.embedding.Embedding.at_points`). Each part is
-decimated on its own, to its share of the proxy's vertices by area but never below ``PART_VERTICES``; a part
-of at most twice that is kept as it is: a screw, an eye or a bolt beside a large body keeps its own
-distances (decimated with the body, a 642-vertex sphere of radius 0.02 beside a unit sphere kept 4 proxy
-vertices and its antipodes came out 0 apart). The network and the landmark
-fields run at the resolution the model was trained at, whatever the user's resolution; what scales with the
-user's mesh is the decimation and one closest-point query per vertex (libigl's AABB tree), both near-linear.
+decimated on its own, and the proxy never has more vertices than asked, however many parts the mesh has
+(:func:`part_budget`): each part gets a floor, ``PART_VERTICES`` or all its own up to twice that, and the rest
+of the budget is shared by area. A screw, an eye or a bolt beside a large body keeps its own distances
+(decimated with the body, a 642-vertex sphere of radius 0.02 beside a unit sphere kept 4 proxy vertices and its
+antipodes came out 0 apart). Where the floors would take more than ``FLOORS`` of the budget (a few dozen
+parts), they are lowered alike for every part, with a warning: 300 parts of 642 vertices get 66 each at
+20,000, and their distances ~4% (MRE) where the mesh itself gives 0.2%; a mesh of more parts than
+``PART_FEWEST`` vertices each can hold is refused. The network and the landmark fields run at the resolution
+the model was trained at, whatever the user's resolution; what scales with the user's mesh is the decimation
+and one closest-point query per vertex (libigl's AABB tree), both near-linear.
 A large point cloud likewise: a random subset embedded, every point blended from its 3 nearest subset points.
 """
 from __future__ import annotations
+
+import warnings
 
 import numpy as np
 
@@ -17,13 +23,16 @@ from typing import NamedTuple
 
 from geodata.mesh import Mesh, face_areas, label_groups, vertex_components
 
-__all__ = ["PROXY_ABOVE", "PROXY_VERTICES", "PART_VERTICES", "Proxy", "proxy_size", "proxy_of", "decimate",
-           "triangle_quality", "cloud_subset", "cloud_weights"]
+__all__ = ["PROXY_ABOVE", "PROXY_VERTICES", "PART_VERTICES", "PART_FEWEST", "Proxy", "proxy_size", "part_budget",
+           "proxy_of", "decimate", "triangle_quality", "cloud_subset", "cloud_weights"]
 
 PROXY_ABOVE = 40_000  # meshes with more vertices are embedded through a proxy (docs/benchmarks.md)
 PROXY_VERTICES = 20_000  # the proxy's vertex count
 COARSE = 3  # the edge collapse stops at COARSE x the proxy's vertices, the remesh does the rest
-PART_VERTICES = 500  # a connected part's fewest proxy vertices (a part of at most twice this is kept whole)
+PART_VERTICES = 500  # a connected part's floor of proxy vertices (a part of at most twice this is kept whole)
+FLOORS = 0.75  # the floors take at most this share of the proxy's vertices (the area's 5,000 of 20,000 at least)
+PART_FEWEST = 4  # the floors lowered for many parts stop here (a tetrahedron): below, the mesh is refused
+REMESH_FEWEST = 100  # a part decimated to fewer vertices is edge-collapsed only (the remesh is erratic there)
 SLIVERS = 0.05  # a mesh with more faces of quality < 0.1 than this is collapsed by pymeshlab (see decimate)
 
 
@@ -48,13 +57,62 @@ class Proxy(NamedTuple):
     bary: np.ndarray
 
 
+def part_budget(size: np.ndarray, area: np.ndarray, target_vertices: int) -> np.ndarray:
+    r"""Each connected part's proxy vertices (int64) from its vertex count ``size`` and its ``area``: at most
+    its own vertices, and :math:`T` = ``target_vertices`` in all, never more. A part's floor is all its
+    vertices up to :math:`2P` (``PART_VERTICES``), :math:`P` above; where the floors sum to more than
+    ``FLOORS`` :math:`T`, each is cut to a common level :math:`m`, the largest with the floors summing to at
+    most ``FLOORS`` :math:`T` but at least ``PART_FEWEST`` (the smallest parts keep all their own few vertices;
+    a warning says how many parts get less than their floor). Then part :math:`c` gets
+    :math:`\min(n_c, \max(\mathrm{floor}_c, \lfloor\lambda A_c\rfloor))`, :math:`\lambda` the largest with
+    the sum at most :math:`T` (about :math:`T / \sum A` for a part much larger than the others). A mesh whose
+    parts cannot have ``PART_FEWEST`` vertices each (their own, if fewer) within :math:`T` is refused
+    (ValueError)."""
+    size, area = np.asarray(size, dtype=np.int64), np.asarray(area, dtype=np.float64)
+    target = int(target_vertices)
+    if size.sum() <= target:
+        return size.copy()
+    fewest = np.minimum(size, PART_FEWEST).sum()
+    if fewest > target:
+        larger = f", a proxy of at least {fewest:,} vertices (proxy=N)," if fewest < size.sum() else ""
+        raise ValueError(f"a mesh of {len(size):,} connected parts does not fit a proxy of {target:,} vertices "
+                         f"({PART_FEWEST} vertices a part, or its own if fewer, take {fewest:,}): embed the mesh "
+                         f"itself (proxy=None){larger} or join its parts (merge coincident vertices, or prepare it)")
+    floor = full = np.where(size <= 2 * PART_VERTICES, size, PART_VERTICES)
+    if floor.sum() > FLOORS * target:  # the largest common level that fits, by bisection over the level
+        lo, hi = 0, int(floor.max())
+        while lo < hi:
+            mid = (lo + hi + 1) // 2
+            lo, hi = (mid, hi) if np.minimum(floor, mid).sum() <= FLOORS * target else (lo, mid - 1)
+        floor = np.minimum(floor, max(lo, PART_FEWEST))
+
+    def budget(scale: float) -> np.ndarray:
+        return np.minimum(size, np.maximum(floor, np.floor(scale * area).astype(np.int64)))
+
+    positive = area > 0
+    lo, hi = 0.0, float((size[positive] / area[positive]).max()) if positive.any() else 0.0
+    for _ in range(100):  # the largest scale whose budgets fit (their sum grows with the scale)
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if budget(mid).sum() <= target else (lo, mid)
+    out = budget(lo)
+    cut = out < full
+    if cut.any():
+        enough = int(np.ceil(full.sum() / FLOORS))
+        instead = (f"a proxy of {enough:,} vertices (proxy=N) or the mesh itself (proxy=None)"
+                   if enough < size.sum() else "the mesh itself (proxy=None)")
+        warnings.warn(f"{len(size):,} connected parts in a proxy of {target:,} vertices: {int(cut.sum()):,} of them "
+                      f"get as few as {int(out[cut].min())} proxy vertices, not the {PART_VERTICES} (or all their "
+                      f"own, up to {2 * PART_VERTICES}) a part gets when the budget allows, and their distances are "
+                      f"coarser; {instead} keeps them", stacklevel=3)
+    return out
+
+
 def proxy_of(vertices: np.ndarray, faces: np.ndarray, target_vertices: int) -> Proxy:
-    r"""The proxy of a mesh with about ``target_vertices`` (:math:`T`) vertices, part by part. Connected part
-    :math:`c` of area :math:`A_c` and :math:`n_c` vertices is decimated (:func:`decimate`) to
-    :math:`t_c = \max(\mathrm{round}(T A_c / \sum A), \mathrm{PART\_VERTICES})` vertices when
-    :math:`n_c > \max(t_c, 2\,\mathrm{PART\_VERTICES})`, else kept as it is. A vertex is placed on its own part's
-    proxy (the closest point there, libigl's AABB tree), a vertex of a part kept whole at itself; a vertex on
-    no face, on the closest point of the whole proxy."""
+    r"""The proxy of a mesh with at most ``target_vertices`` vertices, part by part: connected part :math:`c`
+    is decimated (:func:`decimate`) to its budget :math:`t_c` (:func:`part_budget`, from its vertex count and
+    area), or kept as it is when it has no more than that. A vertex is placed on its own part's proxy (the
+    closest point there, libigl's AABB tree), a vertex of a part kept whole at itself; a vertex on no face, on
+    the closest point of the whole proxy (a part without faces takes no proxy vertices)."""
     from geodata.surface_points import locate_points
 
     v, f = np.asarray(vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64)
@@ -62,9 +120,9 @@ def proxy_of(vertices: np.ndarray, faces: np.ndarray, target_vertices: int) -> P
     n_parts = int(labels.max()) + 1
     face_part = labels[f[:, 0]]
     area = np.bincount(face_part, face_areas(v, f), minlength=n_parts)
-    goal = np.maximum(np.rint(target_vertices * area / max(area.sum(), np.finfo(float).tiny)), PART_VERTICES)
-    size = np.bincount(labels, minlength=n_parts)
-    whole = (size <= goal) | (size <= 2 * PART_VERTICES)
+    size = np.bincount(labels, minlength=n_parts) * (np.bincount(face_part, minlength=n_parts) > 0)  # on faces
+    goal = part_budget(size, area, target_vertices)
+    whole = (size <= goal) & (size > 0)
     face, bary = np.full(len(v), -1, dtype=np.int64), np.zeros((len(v), 3))
     local = np.empty(len(v), dtype=np.int64)  # a vertex's index in its piece (each vertex in one piece at most)
     pieces, offset = [], [0, 0]  # the proxy's pieces; the vertices and faces before the next one
@@ -85,7 +143,7 @@ def proxy_of(vertices: np.ndarray, faces: np.ndarray, target_vertices: int) -> P
             face[f[kept, k]] = first + np.arange(len(kept))
             bary[f[kept, k]] = np.eye(3)[k]
     vertex_groups, face_groups = label_groups(labels, n_parts), label_groups(face_part, n_parts)
-    for c in np.flatnonzero(~whole):
+    for c in np.flatnonzero(~whole & (size > 0)):
         idx = vertex_groups[c]
         local[idx] = np.arange(len(idx))
         coarse = decimate(v[idx], local[f[face_groups[c]]], int(goal[c]))
@@ -100,10 +158,13 @@ def proxy_of(vertices: np.ndarray, faces: np.ndarray, target_vertices: int) -> P
 
 
 def decimate(vertices: np.ndarray, faces: np.ndarray, target_vertices: int) -> Mesh:
-    """The surface with about ``target_vertices`` vertices, triangulated as the model's training meshes are: a
+    """The surface with about ``target_vertices`` vertices and never more (:func:`at_most`), triangulated as the
+    model's training meshes are: a
     quadric edge collapse to ``COARSE`` x the target (fast, close to the surface; its long thin triangles alone
     cost accuracy: 3.7% against 0.64% at 320k vertices, docs/benchmarks.md), then an isotropic remesh to the
-    target (:func:`geodata.stages.remesh.isotropic_remesh`).
+    target (:func:`geodata.stages.remesh.isotropic_remesh`). Below ``REMESH_FEWEST`` vertices, the collapse
+    alone, to the target: the remesh there misses its target by up to 5x and leaves the surface (a 642-vertex
+    unit sphere remeshed to 20 vertices: 4, of radius 0.21).
 
     The collapse is fast-simplification's, except on a mesh rich in slivers (more than ``SLIVERS`` of its
     faces of quality below 0.1, :func:`triangle_quality`), which it barely reduces, slowly (45k -> 27k
@@ -111,22 +172,55 @@ def decimate(vertices: np.ndarray, faces: np.ndarray, target_vertices: int) -> M
     wherever fast-simplification stops short of the target, pymeshlab's quadric edge collapse, keeping the
     topology (without, a sliver-rich 135k-vertex spot's proxy had 1,509 edges of three or more faces, which the
     landmark fields' solver can only take through a manifold copy: 0.77% for the shipped model; with, none)."""
-    import fast_simplification
-
     from geodata.stages.remesh import isotropic_remesh
-    from geodata.stages.repair import compact, meshlab_filter
 
     mesh = Mesh(np.asarray(vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64))
+    if target_vertices < REMESH_FEWEST:
+        return at_most(mesh, target_vertices)
     goal = COARSE * target_vertices
     if mesh.n_vertices > goal:
-        target_faces = max(4, int(round(goal * mesh.n_faces / mesh.n_vertices)))  # boundaries keep their ratio
-        if np.mean(triangle_quality(mesh) < 0.1) <= SLIVERS:
-            v, f = fast_simplification.simplify(mesh.vertices, mesh.faces.astype(np.int32), target_count=target_faces)
-            mesh = compact(np.asarray(v, dtype=np.float64), np.asarray(f, dtype=np.int64))
-        if mesh.n_faces > 1.5 * target_faces:
-            mesh = meshlab_filter(mesh, "meshing_decimation_quadric_edge_collapse", targetfacenum=target_faces,
-                                  preservetopology=True, qualitythr=0.3, autoclean=True)
-    return isotropic_remesh(mesh, target_vertices)
+        mesh = collapse(mesh, max(4, int(round(goal * mesh.n_faces / mesh.n_vertices))))  # boundaries keep their ratio
+    return at_most(isotropic_remesh(mesh, target_vertices), target_vertices)
+
+
+def collapse(mesh: Mesh, target_faces: int) -> Mesh:
+    """The quadric edge collapse of :func:`decimate` to about ``target_faces`` faces."""
+    import fast_simplification
+
+    from geodata.stages.repair import compact, meshlab_filter
+
+    if target_faces >= mesh.n_faces:
+        return mesh
+    if np.mean(triangle_quality(mesh) < 0.1) <= SLIVERS:
+        v, f = fast_simplification.simplify(mesh.vertices, mesh.faces.astype(np.int32), target_count=target_faces)
+        mesh = compact(np.asarray(v, dtype=np.float64), np.asarray(f, dtype=np.int64))
+    if mesh.n_faces > 1.5 * target_faces:
+        mesh = meshlab_filter(mesh, "meshing_decimation_quadric_edge_collapse", targetfacenum=target_faces,
+                              preservetopology=True, qualitythr=0.3, autoclean=True)
+    return mesh
+
+
+def at_most(mesh: Mesh, n_vertices: int) -> Mesh:
+    """``mesh`` collapsed (:func:`collapse`) until it has at most ``n_vertices`` vertices: first to the faces
+    of that many vertices at the mesh's ratio of faces to vertices, then, as an edge collapse takes one vertex
+    and two faces (one on a boundary), two faces fewer for each vertex still over. A surface that the collapse
+    keeping the topology cannot take so low (a torus below 7 vertices) is collapsed without keeping it."""
+    from geodata.stages.repair import meshlab_filter
+
+    if mesh.n_vertices > n_vertices:
+        mesh = collapse(mesh, max(1, int(round(n_vertices * mesh.n_faces / mesh.n_vertices))))
+    for _ in range(4):
+        if mesh.n_vertices <= n_vertices:
+            return mesh
+        mesh = collapse(mesh, max(1, mesh.n_faces - 2 * (mesh.n_vertices - n_vertices)))
+    for _ in range(8):
+        if mesh.n_vertices <= n_vertices:
+            return mesh
+        mesh = meshlab_filter(mesh, "meshing_decimation_quadric_edge_collapse", preservetopology=False,
+                              targetfacenum=max(1, mesh.n_faces - 2 * (mesh.n_vertices - n_vertices)))
+    if mesh.n_vertices > n_vertices:
+        raise RuntimeError(f"the edge collapse stopped at {mesh.n_vertices} vertices, {n_vertices} asked")
+    return mesh
 
 
 def triangle_quality(mesh: Mesh) -> np.ndarray:
