@@ -6,6 +6,7 @@ and the heat method: accuracy and time per field, on one core (issue 55, item 1)
     python benchmarks/bench_field_solver.py --lower-bound [MESH ...]
     python benchmarks/bench_field_solver.py --cloud-lower-bound [MESH ...]
     python benchmarks/bench_field_solver.py --raw
+    python benchmarks/bench_field_solver.py --zoo [--size 1]
 
 Per mesh, a base of ~3-7k vertices and its midpoint subdivisions (``trimesh.remesh.subdivide`` keeps the
 base's vertices and the surface, so the exact distances between base vertices stay the truth at every
@@ -25,6 +26,10 @@ near an edge (needle triangles, angles down to ~1 degree).
 
 --sweep: decimated-max at 5k, 20k, 80k, 320k, 1.35M vertices (2 sources; the heat method and the exact solver up to 80k).
 --ablation: the solver's design choices on the real meshes (probe point, saddle gates, queue, bucket width).
+--zoo: the shapes of geodata.zoo (tori, bent tubes, a coil, a trefoil, a T pipe, a saddle patch, a genus-3 plate, a
+filleted part, slivers, noise) and six classic meshes, 4 sources each: the mean, signed mean and 99th percentile of
+the relative error against the exact solver and ms a field, of today's solver and of the solver before gates at
+every saddle vertex (saddle 0.05 rad, no relaxation).
 --raw: every mesh of ../shared/meshes (both splits) under 10k vertices that is a closed manifold as loaded
 (the exact solver's condition), unremeshed: CAD parts with needle triangles, furniture; 3 sources each.
 --lower-bound: issue 55's table: the triangle-inequality lower bound LB(i, j) = max_k |d(i, l_k) - d(j, l_k)|
@@ -312,6 +317,29 @@ def cloud_lower_bound_table(names, ks=(64, 128, 256), n_sources=20):
                   + f" | {100 * own:.2f}% | {sec:.2f} |", flush=True)
 
 
+def zoo_table(size: float, repeat: int):
+    from geodata._exact_geodesic import Surface
+    from geodata.zoo import ZOO, zoo_mesh
+
+    before = dict(saddle=0.05, relax=False)
+    print(f"\nthe zoo at size {size} and six classic meshes, 4 sources each: mean / signed mean / 99th percentile of "
+          "the relative error against exact, ms a field (one core)")
+    print("| shape | vertices | before: mean | signed | p99 | ms | today: mean | signed | p99 | ms |\n"
+          "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    for name in [*ZOO, "max", "homer", "camel", "penguin", "horse", "cat"]:
+        v, f = load(name) if name in REAL else zoo_mesh(name, size)
+        sources = np.random.default_rng(0).choice(len(v), 4, replace=False).astype(np.int64)
+        exact = Surface(v, f.astype(np.int32)).distances(sources)  # takes boundaries too (the saddle patch)
+        keep = exact > 0
+        solver, cells = VirtualSources(v, f), [name, f"{len(v):,}"]
+        for choice in (before, {}):
+            r = (solver.distances(sources, **choice)[keep] - exact[keep]) / exact[keep]
+            ms = best_of(lambda: solver.distances(sources[:1], **choice), repeat) * 1e3
+            cells += [f"{100 * np.abs(r).mean():.3f}%", f"{100 * r.mean():+.3f}%",
+                      f"{100 * np.quantile(np.abs(r), 0.99):.2f}%", f"{ms:.2f}"]
+        print("| " + " | ".join(cells) + " |", flush=True)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--meshes", nargs="+", default=[*REAL, "irregular", "slivers"])
@@ -321,6 +349,8 @@ def main():
     ap.add_argument("--sweep", action="store_true")
     ap.add_argument("--ablation", action="store_true")
     ap.add_argument("--raw", action="store_true")
+    ap.add_argument("--zoo", action="store_true", help="the shape zoo (geodata.zoo), before and today")
+    ap.add_argument("--size", type=float, default=1.0, help="the zoo's size (1: 3-10k vertices)")
     ap.add_argument("--lower-bound", nargs="*", metavar="MESH", help="issue 55's LB table on these meshes "
                     "(default: max homer camel)")
     ap.add_argument("--cloud-lower-bound", nargs="*", metavar="MESH", help="the same for the point-cloud "
@@ -330,6 +360,9 @@ def main():
     print(f"CPU: {cpu_description()}")
     if args.raw:
         raw_meshes()
+        return
+    if args.zoo:
+        zoo_table(args.size, args.repeat)
         return
     if args.lower_bound is not None:
         lower_bound_table(args.lower_bound or ["max", "homer", "camel"])

@@ -40,7 +40,7 @@ class GeGnnConfig:
     landmark_euclidean: bool = True           # ... and the straight-line distance
     landmark_output: str = "ratio"            # "ratio": d = L exp(MLP); "interval": d = L + (U - L) sigmoid(MLP)
     landmark_fields: str = "heat"             # their solver: "heat" (the heat method, ~1.9% off: models up to v2)
-                                              # or "vsp" (virtual source propagation, ~0.15% off)
+                                              # or "vsp" (virtual source propagation, 0.1-0.3% off)
     # Biharmonic distances (0 = none): m truncated spectral modes per component and their Weyl-law tail,
     # corrected by a SpectralDecoder that reads the embeddings (gegnn.fields.spectral).
     spectral: int = 0

@@ -144,7 +144,7 @@ def main():
 @click.option("--geodesic-backend", type=click.Choice(BACKENDS_GEODESIC), default="vtp", show_default=True,
               help="Geodesic code: exact, all equal to 1e-9: vtp (this package's solver, the fastest), "
                    "tvb-gdist or libigl (the reference); or approximate: vsp (virtual source propagation, "
-                   "~0.15% from exact on average, 15-40x faster than vtp and linear in the mesh: for meshes too "
+                   "0.1-0.3% from exact on average, an order of magnitude faster than vtp and linear in the mesh: for meshes too "
                    "large for an exact solve of every source; the store's params say so). The store records "
                    "it and refuses a run with another.")
 @TIMEOUT_OPTION

@@ -10,9 +10,9 @@ Three backends compute the same exact distances:
 
 and one approximates them, for meshes too large for an exact solve of every source:
 
-- ``vsp``: virtual source propagation (:mod:`geodata.approximate_geodesic`), ~0.15% from exact on
-  average (a few percent at a field's worst vertex), 15-40x faster than vtp at 5k vertices and linear in
-  the mesh (738 ms a field at 1.35M vertices, where vtp takes ~100 s). A store made with it says so in its
+- ``vsp``: virtual source propagation (:mod:`geodata.approximate_geodesic`), 0.1-0.3% from exact on
+  average over the shape zoo and classic meshes (a few percent at a field's worst vertex), an order of
+  magnitude faster than vtp at 5k vertices and linear in the mesh. A store made with it says so in its
   parameters (``geodesic_error``: ``APPROXIMATE``).
 
 Kirsanov's code segfaults on non-manifold input, so every call first checks the closed-manifold
@@ -30,8 +30,8 @@ __all__ = ["BACKENDS", "APPROXIMATE", "geodesic_solver", "exact_geodesic_distanc
            "exact_geodesic_pairs", "polyline_length", "edge_flip_paths", "exact_memory_estimate", "available_memory"]
 
 BACKENDS = ("vtp", "gdist", "libigl", "vsp")
-APPROXIMATE = {"vsp": "approximate: virtual source propagation, ~0.15% mean relative error from exact "
-                      "(0.01-0.21% a mesh over twelve classic meshes; docs/benchmarks.md)"}
+APPROXIMATE = {"vsp": "approximate: virtual source propagation, 0.1-0.3% mean relative error from exact "
+                      "(0.08-0.33% a shape over the shape zoo and classic meshes; docs/benchmarks.md)"}
 # The vtp solver keeps the mesh's half-edge tables (~430 bytes a vertex) and only the wavefront of a source
 # (the windows waiting to cross a face, in chunks that the next ones reuse: ~50 MiB at 1M vertices).
 # The peak resident memory of building the solver and one solve, over what the process held before,

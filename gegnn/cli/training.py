@@ -118,7 +118,7 @@ def _blocks(ctx, param, value):
                    "its decoder is kept too (its weights do not depend on K).")
 @click.option("--landmark-fields", type=click.Choice(["heat", "vsp"]), default="heat", show_default=True,
               help="The landmark fields' solver: the heat method (~1.9% from exact; the shipped landmark models "
-                   "up to v2) or virtual source propagation (vsp: ~0.15% from exact, ~1.5 ms a field at 5k "
+                   "up to v2) or virtual source propagation (vsp: 0.1-0.3% from exact, ~1.6 ms a field at 5k "
                    "vertices; a point-cloud model's on its points' local triangles). A model reads the fields it "
                    "was trained with.")
 @click.option("--landmark-no-embedding", is_flag=True, help="Ablation: the decoder reads landmarks only.")

@@ -96,7 +96,7 @@ def landmark_fields(vertices, faces, k: int, seed: int = 0, t_coef: float = T_CO
         t_coef: heat-method time step (potpourri3d ``t_coef``).
         batch: landmarks chosen a round (:func:`batched_farthest_point_fields`; 1: sequential sampling;
             default FPS_BATCH).
-        fields: ``"heat"`` (the shipped models' up to v2) or ``"vsp"`` (~0.15% from exact, ~1.5 ms a field
+        fields: ``"heat"`` (the shipped models' up to v2) or ``"vsp"`` (0.1-0.3% from exact, ~1.6 ms a field
             at 5k vertices: :mod:`geodata.approximate_geodesic`).
     """
     return landmark_solver(vertices, faces, k, t_coef, batch, fields)(seed)
@@ -149,7 +149,7 @@ def landmark_solver(vertices, faces, k: int, t_coef: float = T_COEF, batch: int 
 
 def _vsp_field(vertices, faces, t_coef: float, fields: int):
     """``fields(sources) -> (N, len(sources))`` by virtual source propagation
-    (:class:`geodata.approximate_geodesic.ApproximateGeodesicSolver`, ~0.15% from exact, one thread: the
+    (:class:`geodata.approximate_geodesic.ApproximateGeodesicSolver`, 0.1-0.3% from exact, one thread: the
     embedding's network runs beside it). A part it refuses (an edge of three or more faces, a pinched vertex:
     a proxy's decimation of a 1M-vertex mesh can make a few) is solved on its
     :func:`geodata.approximate_geodesic.manifold_copy`, each vertex at the least of its copies' distances,
