@@ -4,7 +4,7 @@ from __future__ import annotations
 from geodata.mesh import Mesh, MeshError
 
 __all__ = ["Mesh", "MeshError", "load_mesh"]
-__version__ = "0.3.2"
+__version__ = "0.3.3"
 
 
 def load_mesh(path, *, return_map: bool = False):
