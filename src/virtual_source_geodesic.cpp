@@ -629,29 +629,34 @@ private:
     }
 
     // Vertices whose faces fall into two or more fans joined by no edge through the vertex: a source's
-    // paths would have to pass through the vertex itself, which no face hands on.
+    // paths would have to pass through the vertex itself, which no face hands on. A vertex's corners are
+    // listed in order (build_vertex_faces), so the corner of the face across an edge is found by bisection:
+    // n log n in the valence (a search through the list made a 40k-face fan take seconds).
     int64_t count_pinched() const {
         int64_t pinched = 0;
-        std::vector<int> faces, stack;
+        std::vector<int> stack;
         std::vector<char> seen;
         for (int64_t v = 0; v < n_; ++v) {
-            if (vf_start_[v] == vf_start_[v + 1]) continue;  // in no face
-            faces.assign(vf_.begin() + vf_start_[v], vf_.begin() + vf_start_[v + 1]);
-            seen.assign(faces.size(), 0);
+            const int* first = vf_.data() + vf_start_[v];
+            const int* last = vf_.data() + vf_start_[v + 1];
+            if (first == last) continue;  // in no face
+            seen.assign(last - first, 0);
             seen[0] = 1;
             stack.assign(1, 0);
             size_t reached = 1;
             while (!stack.empty()) {  // the fan of the first face, across the edges through v
-                const int h = faces[stack.back()];
+                const int h = first[stack.back()];
                 stack.pop_back();
                 const int f = h / 3, j = h % 3;
                 for (const int e : {3 * f + j, 3 * f + (j + 2) % 3}) {
-                    const int g = across_[e].packed < 0 ? -1 : across_[e].g();
-                    for (size_t i = 0; g >= 0 && i < faces.size(); ++i)
-                        if (!seen[i] && faces[i] / 3 == g) seen[i] = 1, ++reached, stack.push_back(static_cast<int>(i));
+                    if (across_[e].packed < 0) continue;
+                    const int g = across_[e].g();
+                    const int k = F_[3 * g] == v ? 0 : (F_[3 * g + 1] == v ? 1 : 2);
+                    const size_t i = std::lower_bound(first, last, 3 * g + k) - first;
+                    if (!seen[i]) seen[i] = 1, ++reached, stack.push_back(static_cast<int>(i));
                 }
             }
-            if (reached < faces.size()) ++pinched;
+            if (reached < seen.size()) ++pinched;
         }
         return pinched;
     }

@@ -146,3 +146,17 @@ def test_a_manifold_copy_sets_aside_extra_faces_of_an_edge_and_splits_pinched_ve
         src = cv[np.argmin(np.where(inside, field, np.inf))]
         np.testing.assert_allclose(field[inside], np.linalg.norm(cv[inside] - src, axis=1), rtol=1e-12, atol=1e-14)
     assert np.isfinite(d[:, n + 1:len(v) - 1].min(axis=0)).all()  # b reached from the corner's copy
+
+
+def test_a_vertex_of_forty_thousand_faces_is_a_cone_apex():
+    # a double cone whose two apexes each have 20,000 faces (raw meshes have such fans at poles): the fan
+    # check went through each vertex's face list once per face (2.6 s to build at 40k faces, now 0.03 s)
+    k = 20000
+    t = np.linspace(0, 2 * np.pi, k, endpoint=False)
+    v = np.concatenate([[[0, 0, 0.3]], np.stack([np.cos(t), np.sin(t), 0 * t], 1), [[0, 0, -0.3]]])
+    ring, nxt = 1 + np.arange(k), 1 + (np.arange(k) + 1) % k
+    f = np.concatenate([np.stack([np.zeros(k, int), ring, nxt], 1), np.stack([np.full(k, k + 1), nxt, ring], 1)])
+    d = ApproximateGeodesicSolver(v, f).distances([0], threads=1)[0]
+    slant = np.hypot(1.0, 0.3)
+    np.testing.assert_allclose(d[1:-1], slant, rtol=1e-12)
+    np.testing.assert_allclose(d[-1], 2 * slant, rtol=1e-6)  # around the rim, straight in the unfolding
