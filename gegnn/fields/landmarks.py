@@ -152,7 +152,8 @@ def _vsp_field(vertices, faces, t_coef: float, fields: int):
     (:class:`geodata.approximate_geodesic.ApproximateGeodesicSolver`, 0.1-0.3% from exact, one thread: the
     embedding's network runs beside it). A part it refuses (an edge of three or more faces, a pinched vertex:
     a proxy's decimation of a 1M-vertex mesh can make a few) is solved on its
-    :func:`geodata.approximate_geodesic.manifold_copy`, each vertex at the least of its copies' distances,
+    :func:`geodata.approximate_geodesic.manifold_copy`, each vertex at the least of its copies' distances
+    and a source at a split vertex the source on every fan (each copy solved as one),
     with a warning naming the defects; the heat method's fields only where even that copy is refused."""
     import warnings
 
@@ -175,10 +176,18 @@ def _vsp_field(vertices, faces, t_coef: float, fields: int):
                   f"face(s) set aside and {len(v) - n} vertex copies", stacklevel=2)
 
     def solve(sources):
-        d = solver.distances(np.asarray(sources, dtype=np.int64), threads=1).T  # (N', S)
-        out = d[:n].copy()
-        np.minimum.at(out, origin[n:], d[n:])
-        return _along_edges(out, vertices, unique_edges(faces))
+        sources = np.asarray(sources, dtype=np.int64)
+        # Every copy of a source is the source: a split vertex's other fans (often whole other parts of the
+        # copy, unreached from the first) are solved from their own copy, each column the least over them.
+        copies = n + np.flatnonzero(np.isin(origin[n:], sources))  # rare: a split source's other fans
+        copy, column = np.nonzero(origin[copies][:, None] == sources[None, :])
+        d = solver.distances(np.concatenate([sources, copies[copy]]), threads=1)  # (S + its copies, N')
+        out = d[:len(sources)]
+        np.minimum.at(out, column, d[len(sources):])
+        out = out.T  # (N', S): each vertex at the least of its copies' distances
+        field = out[:n].copy()
+        np.minimum.at(field, origin[n:], out[n:])
+        return _along_edges(field, vertices, unique_edges(faces))
     return solve
 
 
