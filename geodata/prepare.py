@@ -19,7 +19,7 @@ from typing import NamedTuple
 import numpy as np
 
 from geodata import store
-from geodata.geodesic import APPROXIMATE, exact_geodesic_pairs
+from geodata.geodesic import APPROXIMATE, approximation_error, exact_geodesic_pairs
 from geodata.mesh import Mesh, MeshError, one_line, require_closed_manifold, unique_edges, vertex_normals
 from geodata.parallel import current_stage, in_shard, run_isolated
 from geodata.stages.load import MESH_SUFFIXES, load_mesh_bytes
@@ -288,9 +288,13 @@ def _compute(task: MeshTask, config: PrepareConfig) -> tuple[dict, dict]:
         "input/bary": done.places.bary.astype(np.float32),
         "input/offset": done.places.offset.astype(np.float32),
     }
-    return arrays, {"timings": timings, "skipped_sources": done.skipped.tolist(), "warnings": notes,
-                    "geometry_key": store.geometry_key(arrays["vertices"], done.mesh.faces),
-                    "normalization": {"center": done.center.tolist(), "scale": done.scale}}
+    attrs = {"timings": timings, "skipped_sources": done.skipped.tolist(), "warnings": notes,
+             "geometry_key": store.geometry_key(arrays["vertices"], done.mesh.faces),
+             "normalization": {"center": done.center.tolist(), "scale": done.scale}}
+    if config.geodesic_backend in APPROXIMATE:  # measured against exact fields of two of its sources
+        attrs["geodesic_error"] = run_stage(timings, "geodesic check", approximation_error, done.mesh, done.pairs,
+                                            done.distances, check=False)
+    return arrays, attrs
 
 
 def library_versions() -> dict:

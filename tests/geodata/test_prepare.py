@@ -6,6 +6,7 @@ import sys
 import time
 
 import numpy as np
+import pytest
 import zarr
 from click.testing import CliRunner
 
@@ -253,3 +254,9 @@ def test_the_approximate_backend_says_so_in_the_params_and_is_near_exact(raw, tm
         errors.append(np.abs(d[rows] - truth) / truth)
     errors = np.concatenate(errors)
     assert 0 < errors.mean() < 0.005  # measured 0.09%: approximate, not exact
+    # each mesh records its own error, measured against exact fields of its first two sources
+    first = p[np.sort(np.unique(p[:, 0], return_index=True)[1]), 0][:2]
+    truth = np.concatenate([exact(int(s))[p[p[:, 0] == s, 1]] for s in first])
+    expect = np.mean(np.abs(np.concatenate([d[p[:, 0] == s] for s in first]) - truth) / truth)
+    recorded = store.mesh_attrs(out, mesh_id)["geodesic_error"]
+    assert 0 < recorded < 0.005 and recorded == pytest.approx(expect, rel=1e-4)
