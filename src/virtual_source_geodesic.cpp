@@ -209,6 +209,7 @@ struct Workspace {
     std::vector<int> order;  // the faces in the order the queue first gave them out: relax_across_faces' sweeps
     std::vector<char> ordered;
     std::vector<char> detoured;  // per vertex: its distance came by a path bent around a gate
+    std::vector<double> before;  // per vertex: the distances before the last update of relax_across_faces
 };
 
 class VirtualSources {
@@ -390,30 +391,40 @@ private:
     }
     // Gates at every saddle vertex leave no shortcut, but one source a face drops the other families of
     // paths that cross it: a vertex reached around a gate (detoured) comes out long where a family that
-    // passed the gate's other side would have reached it straight. One sweep over the faces, in the order
-    // the queue first gave them out, takes the surplus back with the triangle update of fast marching
-    // (Kimmel and Sethian 1998) on the faces with a detoured corner: the point S at d(a) from a and d(b)
-    // from b on the far side of the edge ab, and
-    //     d(c) <- |S - c|    where the ray from S to c crosses the segment ab,
-    // a lowered corner counting as detoured for the faces after it. Only there: on a sphere, which has no
-    // saddle, the update everywhere takes the fields 0.25% below exact (they are 0.12% above).
+    // passed the gate's other side would have reached it straight, and where two families meet on a convex
+    // surface a vertex is a little long too. Fast marching's triangle update (Kimmel and Sethian 1998) takes
+    // the surplus back: the point S at d(a) from a and d(b) from b on the far side of the edge ab, and
+    //     d(c) <- |S - c|    where the ray from S to c crosses the segment ab.
+    // First one sweep over the faces with a detoured corner, in the order the queue first gave them out, a
+    // lowered corner counting as detoured for the faces after it (it carries the family on); then one
+    // update of every face from the values the sweep left (a lowered value is not used again in it). On
+    // a surface without saddles the chained update comes out short: a sphere's fields 0.25% below exact
+    // where they are 0.12% above; the single update there takes them to 0.08% above.
     void relax_across_faces(double* d, Workspace& w) const {
         for (const int f : w.order) {
             if (!(w.detoured[F_[3 * f]] || w.detoured[F_[3 * f + 1]] || w.detoured[F_[3 * f + 2]])) continue;
             for (int k = 0; k < 3; ++k) {
-                const Opposite& o = opposite_[3 * f + k];
-                const double da = d[F_[3 * f + (k + 1) % 3]], db = d[F_[3 * f + (k + 2) % 3]];
-                if (!(da < INF && db < INF) || !(o.cy > 0.0)) continue;
-                const double x = (da * da - db * db + o.L * o.L) * o.half_inv_L, h2 = da * da - x * x;
-                if (!(h2 > 0.0)) continue;
-                const double y = std::sqrt(h2), at = x + (o.cx - x) * y / (o.cy + y);
-                if (at < 0.0 || at > o.L) continue;
-                const double to_c = norm(o.cx - x, o.cy + y);
-                double& dc = d[F_[3 * f + k]];
-                if (to_c < dc * (1.0 - SETTLED)) dc = to_c, w.detoured[F_[3 * f + k]] = 1;
+                const double to_c = across_face(f, k, d);
+                if (to_c < d[F_[3 * f + k]] * (1.0 - SETTLED)) d[F_[3 * f + k]] = to_c, w.detoured[F_[3 * f + k]] = 1;
             }
         }
+        w.before.assign(d, d + n_);
+        for (const int f : w.order)
+            for (int k = 0; k < 3; ++k) d[F_[3 * f + k]] = std::min(d[F_[3 * f + k]], across_face(f, k, w.before.data()));
     }
+
+    // The triangle update of face f's corner k from the other two corners' values d (INF where it has none).
+    double across_face(int f, int k, const double* d) const {
+        const Opposite& o = opposite_[3 * f + k];
+        const double da = d[F_[3 * f + (k + 1) % 3]], db = d[F_[3 * f + (k + 2) % 3]];
+        if (!(da < INF && db < INF) || !(o.cy > 0.0)) return INF;
+        const double x = (da * da - db * db + o.L * o.L) * o.half_inv_L, h2 = da * da - x * x;
+        if (!(h2 > 0.0)) return INF;
+        const double y = std::sqrt(h2), at = x + (o.cx - x) * y / (o.cy + y);
+        if (at < 0.0 || at > o.L) return INF;
+        return norm(o.cx - x, o.cy + y);
+    }
+
     // Each face's corner k seen from the edge opposite it, from corner k + 1 (the origin) to k + 2 (at
     // (L, 0)): the corner at (cx, cy), cy > 0 (0: a degenerate face, never relaxed).
     struct Opposite {
