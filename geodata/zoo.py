@@ -22,7 +22,7 @@ from typing import Callable
 
 import numpy as np
 
-__all__ = ["ZOO", "zoo_mesh", "torus", "tube", "saddle_patch"]
+__all__ = ["ZOO", "zoo_mesh", "zoo_variants", "torus", "tube", "saddle_patch"]
 
 Mesh = tuple[np.ndarray, np.ndarray]
 
@@ -198,3 +198,33 @@ def zoo_mesh(name: str, size: float = 1.0) -> Mesh:
         raise ValueError(f"no zoo shape {name!r}; the zoo has {', '.join(ZOO)}")
     v, f = ZOO[name](size)
     return np.ascontiguousarray(v, dtype=np.float64), np.ascontiguousarray(f, dtype=np.int64)
+
+
+def zoo_variants(count: int, seed: int = 0):
+    """``count`` random shapes of the zoo's tubular kinds, for training data: (name, vertices, faces) with
+    tori of major / minor radius 1.5-12, tubes along arcs of 90-330 degrees, helices of 1.5-4 turns and
+    (p, q) torus knots, tube radii and resolutions drawn at random (3-12k vertices before remeshing)."""
+    rng = np.random.default_rng(seed)
+    for i in range(count):
+        kind = ("torus", "arc", "helix", "knot")[i % 4]
+        if kind == "torus":
+            ratio = rng.uniform(1.5, 12.0)
+            n_minor = int(rng.integers(16, 40))
+            v, f = torus(1.0, 1.0 / ratio, int(n_minor * ratio * rng.uniform(0.6, 1.2)), n_minor)
+        elif kind == "arc":
+            bend = np.radians(rng.uniform(90, 330))
+            t = np.linspace(0, bend, int(rng.integers(150, 400)))
+            v, f = tube(np.stack([np.cos(t), np.sin(t), 0 * t], 1), rng.uniform(0.08, 0.3), int(rng.integers(12, 28)))
+        elif kind == "helix":
+            turns = rng.uniform(1.5, 4.0)
+            t = np.linspace(0, turns * 2 * np.pi, int(300 * turns))
+            radius = rng.uniform(0.06, 0.14)
+            pitch = rng.uniform(2.5, 4.0) * radius / np.pi
+            v, f = tube(np.stack([np.cos(t), np.sin(t), pitch * t], 1), radius, int(rng.integers(12, 24)))
+        else:
+            p, q = ((2, 3), (2, 5), (3, 4), (3, 5))[int(rng.integers(4))]
+            t = np.linspace(0, 2 * np.pi, int(200 * (p + q)), endpoint=False)
+            r = 2 + np.cos(q * t)
+            curve = np.stack([r * np.cos(p * t), r * np.sin(p * t), -np.sin(q * t)], 1) / 3
+            v, f = tube(curve, rng.uniform(0.06, 0.1), int(rng.integers(12, 20)), closed=True)
+        yield f"{kind}-{i:03d}", v, f
