@@ -38,7 +38,8 @@ def test_a_meshs_own_gluing_gives_its_fields_and_a_flat_grid_stays_euclidean(glu
     np.testing.assert_allclose(d, approximate_geodesic_distances(v, f, sources, threads=1), rtol=1e-12)
     np.testing.assert_allclose(d, np.linalg.norm(v[None] - v[sources][:, None], axis=-1), rtol=1e-12, atol=1e-14)
     # a sphere: as near the great circles as the mesh's own fields, relaxed along the edges (3% of the values
-    # lower as pairs, 20% as a cover): measured 0.237% and 0.247% against the mesh's 0.239%
+    # lower as pairs, 20% as a cover): measured 0.237% and 0.247% against the mesh's 0.283% (its fields are
+    # 0.07% from the polyhedron's exact distances, which are 0.22% below the great circles)
     s = trimesh.creation.icosphere(3)
     v, f = np.asarray(s.vertices), np.asarray(s.faces)
     faces, twins = glue(v, f)
@@ -47,7 +48,7 @@ def test_a_meshs_own_gluing_gives_its_fields_and_a_flat_grid_stays_euclidean(glu
     far = np.arccos(np.clip(v[[0, 300]] @ v.T, -1, 1)) > 0
     great = np.arccos(np.clip(v[[0, 300]] @ v.T, -1, 1))[far]
     error, own = (np.mean(np.abs(x[far] - great) / great) for x in (glued, mesh))
-    assert error < 1.1 * own < 0.003, (error, own)
+    assert error < 1.1 * own < 0.0035, (error, own)
 
 
 @pytest.mark.parametrize("glue", [paired_mesh, cover_mesh])
