@@ -1,10 +1,13 @@
-"""The key figures of README.md and the docs agree with docs/results.json, one value per fact (issue 51).
+"""The key figures of README.md and the docs agree with docs/results.json, one value per fact.
 
-docs/results.json holds each figure once, with the command, date and CPU that measured it. Each CLAIM below
-finds where a page states a figure (the regex's group is the figure, its surroundings say which model and
-what quantity); the test fails when a page states it differently, or when a claim no longer finds its
-sentence (a rewritten page must be tied to the file again, not silently drop out of the check).
+docs/results.json holds each figure once, with the command, date and CPU that measured it. A guide page in
+docs/ states one as ``{{ results.KEY }}``, which the site's hook (docs/_ext/results_hook.py) replaces with the
+file's value; README.md, read on its own, states the values. Each CLAIM below finds where a page states a
+figure, read as the site shows it (the regex's group is the figure, its surroundings say which model and what
+quantity); the test fails when a page states it differently, or when a claim no longer finds its sentence (a
+rewritten page must be tied to the file again, not silently drop out of the check).
 """
+import importlib.util
 import json
 import re
 from pathlib import Path
@@ -13,6 +16,10 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "docs" / "results.json"
+HOOK = ROOT / "docs" / "_ext" / "results_hook.py"
+_spec = importlib.util.spec_from_file_location("results_hook", HOOK)
+results_hook = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(results_hook)
 
 # (figure key, page, pattern with one group: the figure as the page states it)
 CLAIMS = [
@@ -96,7 +103,8 @@ CLAIMS = [
     ("time.heat", "docs/model-card.md", r"\*\*[\d.]+ s\*\* in all, against\n([\d.]+ s) for the heat method"),
     # what training on one's own meshes costs (docs/own-data.md's estimates rest on these)
     ("prepare.mesh.cpu", "docs/own-data.md", r"\| `geodata prepare --pairs 100000` \| ([\d.]+ s) \| mesh"),
-    ("train.fields.landmark.cpu", "docs/own-data.md", r"\| landmark fields \(K = 256, 4 draws\), before the first step \| ([\d.]+ s) \|"),
+    ("train.fields.landmark.cpu", "docs/own-data.md",
+     r"\| landmark fields \(K = 256 by virtual sources, the preset's; 4 draws\), before the first step \| ([\d.]+ s) \|"),
     ("train.step.landmark.cpu", "docs/own-data.md", r"\| a training step of `--model landmark` \(4 meshes, 20,000 pairs each\) \| ([\d.]+ s) \|"),
     ("train.step.paper256.cpu", "docs/own-data.md", r"the paper's 256-channel network\) \| ([\d.]+ s) \| step"),
     ("train.step.landmark.cpu", "gegnn/training/estimate.py", r"one thread; [\d.]+ s against ([\d.]+ s) on a"),
@@ -147,7 +155,8 @@ def mismatches(claims, figures_, read):
 
 
 def read_page(page):
-    return (ROOT / page).read_text(encoding="utf-8")
+    """The page as the site shows it: its ``{{ results.KEY }}`` replaced by the figures' values."""
+    return results_hook.render((ROOT / page).read_text(encoding="utf-8"))
 
 
 def test_results_file_names_command_date_and_cpu():
@@ -217,3 +226,43 @@ def test_a_benchmark_records_a_figure_with_its_command_date_and_cpu(tmp_path, mo
     assert list(after) == list(before) and all(after[k] == before[k] for k in before if k != "speedup.landmark-v2")
     with pytest.raises(ValueError, match="new figure"):
         record("mre.landmark-v9", "0.5%", path=path)
+
+
+def test_the_site_fills_every_placeholder_from_the_results_file():
+    """mkdocs runs the hook; every {{ results.KEY }} of every page names a figure of the file (the build would
+    fail on another); a placeholder is replaced by its value and an unknown key is refused by name."""
+    assert re.search(r"(?m)^hooks:\n  - docs/_ext/results_hook\.py$", (ROOT / "mkdocs.yml").read_text())
+    figs = figures()
+    used = set()
+    for page in sorted((ROOT / "docs").rglob("*.md")):
+        text = page.read_text(encoding="utf-8")
+        used |= set(results_hook.PLACEHOLDER.findall(text))
+        assert "{{" not in results_hook.render(text), f"{page}: a placeholder not of the form {{{{ results.KEY }}}}"
+    assert used and used <= set(figs)
+    assert results_hook.render("at {{ results.mre.landmark-v3 }}, {{results.time.paper}}.") == (
+        f"at {figs['mre.landmark-v3']['value']}, {figs['time.paper']['value']}.")
+    with pytest.raises(KeyError, match="mre.landmark-v9"):
+        results_hook.render("{{ results.mre.landmark-v9 }}")
+
+
+def test_the_estimates_for_1k_to_50k_meshes_follow_from_the_measured_costs():
+    """docs/own-data.md's table of times: each term is N meshes' prepare and fields at one mesh a core, and N / 4
+    steps (the CPU's one-thread step, the GPU step of gegnn.training.estimate), from the figures of
+    docs/results.json as rounded on the page; a figure measured again must change the table with it."""
+    from gegnn.training.estimate import GPU_STEP_S
+
+    figs = {k: float(v["value"].split()[0]) for k, v in figures().items() if v["value"].endswith(" s")}
+    seconds = {"s": 1, "min": 60, "h": 3600}
+    rows = re.findall(r"(?m)^\| ([\d,]+) \| ([^|]+) \| ([^|]+) \| [^|]+ \|$", read_page("docs/own-data.md"))
+    assert [int(n.replace(",", "")) for n, _, _ in rows] == [1000, 10000, 50000]
+    for n, cpu, gpu in rows:
+        n = int(n.replace(",", ""))
+        for cell, cores, step in ((cpu, 2, figs["train.step.landmark.cpu"]), (gpu, 16, GPU_STEP_S)):
+            terms = [n * figs["prepare.mesh.cpu"] / cores, n * figs["train.fields.landmark.cpu"] / cores, n / 4 * step]
+            written = re.fullmatch(r"([\d.]+) (s|min|h) \+ ([\d.]+) (s|min|h) \+ ([\d.]+) (s|min|h) = "
+                                   r"\*\*([\d.]+) (s|min|h)\*\*", cell.strip())
+            assert written, cell
+            values = written.groups()
+            for (number, unit), exact in zip(zip(values[::2], values[1::2]), [*terms, sum(terms)]):
+                decimals = len(number.partition(".")[2])
+                assert abs(float(number) - exact / seconds[unit]) <= 0.501 * 10 ** -decimals, (n, cell, number, unit)
