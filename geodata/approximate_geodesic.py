@@ -22,7 +22,7 @@ trefoil knot, a T pipe, a saddle patch, a genus-3 plate, a filleted part, sliver
 at vertices of excess over 0.05 rad cut corners by 1.5-5.8% on the tori and tubes; 0.12-0.19% on six
 classic meshes. The fields come out a little long rather than short (signed mean -0.12 to +0.30%); the worst
 vertex of a field, beside its source, is a few percent off. Cost on one core: 0.8-2.3 ms a field at 3-10k
-vertices, linear in the mesh; memory ~0.6 kB a vertex. Several sources run on threads, with the same fields
+vertices, linear in the mesh; memory ~0.9 kB a vertex. Several sources run on threads, with the same fields
 for any thread count. A field that puts a vertex over 5% nearer than the straight line from its source
 (which no surface path can be) is solved again by the exact solver, with a warning.
 

@@ -23,17 +23,19 @@
 // 0) stalls at every face whose middle corner faces the source (0.9% mean error instead of 0.2%).
 //
 // Gates. Where g keeps S although the ray to c passes a saddle endpoint e (its corner angles sum to
-// more than 2 pi + `saddle`), e becomes a gate of g's source on that side: later faces see S only on
-// the near side of the ray from S to e, and a vertex beyond it gets sigma + |S - e| + |e - x|, the path
-// around e. Without gates, a strip that wraps round a saddle keeps its source and its far vertices get
-// straight paths through the saddle's excess angle that the surface does not have (shortcuts: most of
-// the error was below the exact distance); a gate at every slight saddle blocks too much the other
-// way. Measured over twelve classic meshes (docs/benchmarks.md, "Fast geodesic fields"): 0.22% mean
-// error without gates, 0.14% with saddle = 0.05 rad (0.03-0.1 within 0.005 points of it).
+// more than 2 pi + `saddle`, by default any saddle), e becomes a gate of g's source on that side: later
+// faces see S only on the near side of the ray from S to e, and a vertex beyond it gets
+// sigma + |S - e| + |e - x|, the path around e. Without gates, a strip that wraps round a saddle keeps its
+// source and its far vertices get straight paths through the saddle's excess angle that the surface does
+// not have: shortcuts. A gate only where one vertex's excess passed 0.05 rad let strips through smooth
+// saddle regions, whose excess is spread over many vertices (tori 0.6-1.9% short, bent tubes 4-6%).
 //
 // A face keeps one source where the exact solver keeps a window for each family of paths that crosses
-// it: where two families meet, a vertex a few percent off remains.
-//
+// it: where two families meet, and behind every gate, its vertices come out a little long. The fields end
+// with fast marching's triangle update over the faces (relax_across_faces), which takes most of that back.
+// Measured on the shape zoo and classic meshes (docs/benchmarks.md, "The shape zoo"): 0.07-0.32% mean
+// error, signed -0.12 to +0.29% (long, not short).
+
 // Faces wait in Dial's buckets of width `bucket` mean edge lengths, first in first out within a bucket
 // (the default), or in a binary heap, by their source's distance at their centroid; a face improved
 // while it waits is handed on once, with its newest source. An accepted candidate is nearer at m by a
@@ -44,8 +46,8 @@
 // source through a vertex). Faces may be oriented against each other. Vertices of other connected parts
 // stay at infinity. A triangle soup (a point cloud's local triangles) comes with its gluing instead, each
 // half-edge's twin given; its fields end relaxed along its edges (relax_along_edges). Memory: 64 bytes a
-// half-edge (its unfolding, one cache line), 48 a face and 24 a vertex, and per thread 72 a face and 8
-// a vertex: ~0.5 kB a vertex in all.
+// half-edge (its unfolding, one cache line), 144 a face and 24 a vertex, and per thread 85 a face and 17
+// a vertex: ~0.9 kB a vertex in all.
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>
 #include <nanobind/stl/optional.h>
