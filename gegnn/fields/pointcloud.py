@@ -25,7 +25,12 @@ r"""Point clouds as GeGnn inputs: the graph, the normals and the landmark fields
   other; along the graph the validation clouds' errors stay within 0.02 points of that, at 8k points the
   fields take 0.1 s instead of 0.2 s.) Each point's local triangulation from neighbours near its tangent plane (:func:`surface_neighbors`), not across a gap to a nearby part
   (heat-method MRE on the validation clouds 4.22% -> 3.85%), and with a scan's own oriented normals
-  only from neighbours facing the same side (3.93% -> 3.32% with the meshes' normals).
+  only from neighbours on its own sheet (:mod:`gegnn.fields.cloud_sides`: facing the same side, the
+  offset along the surface; 3.93% -> 3.32% with the meshes' normals).
+* **Close walls**: with a scan's own normals the projection too is fitted to each point's side only, so
+  that two sheets closer than the neighbourhood is wide are not fitted as one between them; the points
+  where two such sheets are seen and the normals do not tell them apart (or no normals are given) are
+  flagged ``ambiguous`` (:func:`gegnn.fields.cloud_sides.close_walls`, on the points as given).
 
 Exact duplicates are merged before any of it and share their point's values.
 """
@@ -39,6 +44,7 @@ import numpy as np
 from geodata.mesh import label_groups
 
 from .. import threads
+from .cloud_sides import close_walls, facing_neighbors
 from .landmarks import LandmarkFields, _along_edges, graph_farthest_points, landmark_columns
 
 __all__ = ["CloudGraph", "cloud_graph", "mls_project", "surface_neighbors", "knn_edges", "graph_parts",
@@ -64,8 +70,10 @@ class CloudGraph:
     only the network does (:meth:`gegnn.GeGnn.embed` reads them beside the landmark fields)."""
 
     def __init__(self, points: np.ndarray, edges: np.ndarray, part: np.ndarray, neighbors: np.ndarray,
-                 normals: np.ndarray | None = None):
+                 normals: np.ndarray | None = None, ambiguous: np.ndarray | None = None, scatter: float = 0.0):
         self.points, self.edges, self.part, self.neighbors = points, edges, part, neighbors
+        self.ambiguous = np.zeros(len(points), dtype=bool) if ambiguous is None else ambiguous
+        self.scatter = scatter
         if normals is not None:
             self.normals = np.asarray(normals, dtype=np.float64)
 
@@ -94,7 +102,7 @@ def knn_edges(points: np.ndarray, k: int = KNN, normals: np.ndarray | None = Non
     return np.stack([key // len(points), key % len(points)], axis=1), nbrs
 
 
-def mls_project(points: np.ndarray, k: int = MLS_K) -> np.ndarray:
+def mls_project(points: np.ndarray, k: int = MLS_K, normals: np.ndarray | None = None) -> np.ndarray:
     r"""Every point moved onto the quadric fitted to its neighbourhood (one moving-least-squares step).
 
     With the point :math:`p` and its k nearest neighbours :math:`q_j` at distances :math:`d_j`, weights
@@ -104,15 +112,24 @@ def mls_project(points: np.ndarray, k: int = MLS_K) -> np.ndarray:
     :math:`z = c_0 + c_1 u + c_2 v + c_3 u^2 + c_4 uv + c_5 v^2` is fitted by weighted least squares and
     :math:`p' = p + c_0\,n`. A point whose fit would move it by more than half its neighbourhood's radius
     :math:`d_k` (too few or degenerate neighbours) stays where it is. Needs more than k distinct points
-    (fewer: all of them are used). Compiled (``src/cloud_ops.cpp``), in blocks of rows on torch's threads."""
+    (fewer: all of them are used). With the cloud's own oriented ``normals``, the k nearest on the point's own
+    side (:func:`gegnn.fields.cloud_sides.facing_neighbors` among the 4k nearest), so that the two sides of
+    a wall thinner than the neighbourhood are not fitted as one surface between them. Compiled
+    (``src/cloud_ops.cpp``), in blocks of rows on torch's threads."""
     from scipy.spatial import cKDTree
 
     from .._cloud_ops import mls_project as project
 
     points = np.ascontiguousarray(points, dtype=np.float64)
     k = min(k, len(points) - 1)
-    dist, nbrs = cKDTree(points).query(points, k + 1, workers=threads.count())
-    nbrs = nbrs.astype(np.int64, copy=False)
+    if normals is None:
+        dist, nbrs = cKDTree(points).query(points, k + 1, workers=threads.count())
+        nbrs = nbrs.astype(np.int64, copy=False)
+    else:  # the point itself first (distance 0), then its sheet's nearest, nearest first
+        nbrs, dist = facing_neighbors(points, normals, k, None, 4 * k)
+        by_distance = np.argsort(dist, axis=1, kind="stable")
+        nbrs = np.concatenate([np.arange(len(points))[:, None], np.take_along_axis(nbrs, by_distance, axis=1)], 1)
+        dist = np.concatenate([np.zeros((len(points), 1)), np.take_along_axis(dist, by_distance, axis=1)], 1)
     return threads.by_rows(lambda rows: project(points, threads.indices(rows), nbrs[rows], dist[rows]), len(points))
 
 
@@ -178,10 +195,13 @@ def _tree_signs(order: np.ndarray, parent: np.ndarray, normals: np.ndarray) -> n
 
 def cloud_graph(points: np.ndarray, k: int = KNN, normals: np.ndarray | None = None) -> CloudGraph:
     """The graph of a point cloud of distinct points, made of the points projected by :func:`mls_project`
-    (see the module); ``normals``: given ones (used as they are, unit length) instead of estimated."""
-    points = mls_project(points)
+    (see the module); ``normals``: given ones (used as they are, unit length) instead of estimated. Its
+    ``ambiguous`` points and ``scatter`` come from the points as given (the projection would fit two close
+    sheets as one): :func:`gegnn.fields.cloud_sides.close_walls`."""
+    ambiguous, scatter = close_walls(points, normals)
+    points = mls_project(points, normals=normals)
     edges, nbrs = knn_edges(points, k, normals)
-    return CloudGraph(points, edges, graph_parts(len(points), edges), nbrs, normals)
+    return CloudGraph(points, edges, graph_parts(len(points), edges), nbrs, normals, ambiguous, scatter)
 
 
 def graph_parts(n: int, edges: np.ndarray) -> np.ndarray:
@@ -254,15 +274,19 @@ def surface_neighbors(points: np.ndarray, k: int = HEAT_K, cone_deg: float = CON
     the tangent plane and is left out, where the plain k nearest would join the two sides in the local
     triangulation. n is fitted twice (:func:`pca_normals`): to the point and its CONE_FIT nearest, then to
     the point and its CONE_FIT nearest within that first cone, so that near a gap the other side, which
-    tilts a plain fit, does not set the cone. With the cloud's own oriented ``normals`` (a scan's), n is
-    the point's and a neighbour must also face the same side, :math:`n_q \cdot n_p > 0`: the two sides of
-    a thin wall face away from each other. Needs more than 6k points (fewer: all)."""
+    tilts a plain fit, does not set the cone. With the cloud's own oriented ``normals`` (a scan's), the
+    k nearest on the point's own sheet instead (:func:`gegnn.fields.cloud_sides.facing_neighbors`: facing
+    the same side, :math:`n_q \cdot n_p > 0`, as the two sides of a thin wall do not, and within the cone
+    about the plane normal to :math:`n_p + n_q`, which a sheet stacked on the point's does not meet). Needs
+    more than 6k points (fewer: all)."""
     from scipy.spatial import cKDTree
 
     from .._cloud_ops import cone_neighbors
 
     points = np.ascontiguousarray(points, dtype=np.float64)
-    given = np.zeros((0, 3)) if normals is None else np.ascontiguousarray(normals, dtype=np.float64)
+    if normals is not None:
+        return facing_neighbors(points, normals, k, cone_deg)[0]
+    given = np.zeros((0, 3))
     sin_cone = float(np.sin(np.radians(cone_deg)))
     tree = cKDTree(points)
     out = np.empty((len(points), k), dtype=np.int64)

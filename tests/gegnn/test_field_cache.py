@@ -38,7 +38,7 @@ def test_specs_name_their_fields_and_read_a_models_config():
     assert FieldSpec.of(small_config(landmarks=64, points=8)) == FieldSpec("landmark", 64, 8)
     assert FieldSpec.of(small_config(spectral=32)) == FieldSpec("spectral", 32)
     mesh, cloud, codes = FieldSpec("landmark", 64), FieldSpec("landmark", 64, 8), FieldSpec("spectral", 32)
-    assert (mesh.name, cloud.name, codes.name) == ("k64-rounds16", "k64-cloud8-surface2", "spectral32")
+    assert (mesh.name, cloud.name, codes.name) == ("k64-rounds16", "k64-cloud8-surface2-v2", "spectral32")
     assert (mesh.columns, codes.columns) == (64, 33)  # the spectral codes and their tail scale
     assert (mesh.draws, cloud.draws, codes.draws) == (LANDMARK_DRAWS, LANDMARK_DRAWS, 1) and LANDMARK_DRAWS > 1
     # fields by virtual source propagation: their own folder, so heat and vsp fields never mix, a mesh's and
@@ -46,7 +46,7 @@ def test_specs_name_their_fields_and_read_a_models_config():
     assert FieldSpec.of(small_config(landmarks=64, landmark_fields="vsp")) == FieldSpec("landmark", 64, 0, "vsp")
     assert FieldSpec("landmark", 64, 0, "vsp").name == "k64-rounds16-vsp-v2"
     assert FieldSpec.of(small_config(landmarks=64, points=8, landmark_fields="vsp")) == FieldSpec("landmark", 64, 8, "vsp")
-    assert FieldSpec("landmark", 64, 8, "vsp").name == "k64-cloud8-surface2-vsp-v2"
+    assert FieldSpec("landmark", 64, 8, "vsp").name == "k64-cloud8-surface2-vsp-v3"
     with pytest.raises(ValueError, match="landmark_fields must be one of heat, vsp"):
         small_config(landmarks=64, landmark_fields="exact")
 

@@ -1,0 +1,80 @@
+"""Point clouds where two sheets of surface come closer than the points' spacing (gegnn.fields.cloud_sides):
+with a scan's normals the sides are never glued; without them the points are flagged."""
+import numpy as np
+
+from gegnn.fields.cloud_sides import close_walls, facing_neighbors
+from gegnn.fields.pointcloud import CONE_DEG, mls_project, surface_neighbors
+
+H = 0.05  # the spacing of the synthetic sheets
+
+
+def sheets(offsets, normals_z, n=40, seed=0):
+    """Flat square sheets at heights ``offsets`` (in spacings), their normals +-z, points jittered."""
+    rng = np.random.default_rng(seed)
+    x, y = np.meshgrid(np.arange(n) * H, np.arange(n) * H)
+    parts, normals = [], []
+    for z, nz in zip(offsets, normals_z):
+        p = np.stack([x.ravel(), y.ravel(), np.full(x.size, z * H)], axis=1)
+        p[:, :2] += rng.uniform(-0.25, 0.25, size=(len(p), 2)) * H
+        parts.append(p)
+        normals.append(np.tile([0.0, 0.0, nz], (len(p), 1)))
+    side = np.repeat(np.arange(len(offsets)), n * n)
+    return np.concatenate(parts), np.concatenate(normals), side
+
+
+def interior(p):
+    return np.flatnonzero(((p[:, :2] > 0.3 * p[:, :2].max()) & (p[:, :2] < 0.7 * p[:, :2].max())).all(axis=1))
+
+
+def test_neighbours_stay_on_their_sheet_of_three_stacked_a_spacing_apart():
+    """A sheet folded twice: the first and third layers face the same way, the second away from both."""
+    p, normals, side = sheets([0.0, -1.0, -2.0], [1.0, -1.0, 1.0])
+    inner = interior(p)
+    nbrs = surface_neighbors(p, 15, normals=normals)
+    assert (side[nbrs[inner]] == side[inner, None]).all()
+
+
+def test_a_sheet_that_curves_within_a_spacing_keeps_its_neighbours_round_the_curve():
+    """A thin tube (five points round, exact normals): the chord to the next point round lies 36 degrees off
+    the point's tangent plane, outside a 30-degree cone about it, but at right angles to the two points'
+    mean normal, so it stays a neighbour."""
+    around, rows = 5, 40
+    radius = H / (2 * np.sin(np.pi / around))  # a spacing between the points round
+    a, z = np.meshgrid(np.arange(around) * 2 * np.pi / around, np.arange(rows) * H)
+    normals = np.stack([np.cos(a.ravel()), np.sin(a.ravel()), np.zeros(a.size)], axis=1)
+    p = normals * radius + np.stack([np.zeros(a.size), np.zeros(a.size), z.ravel()], axis=1)
+    nbrs, _ = facing_neighbors(p, normals, 6, CONE_DEG)
+    inner = np.flatnonzero((z.ravel() > 10 * H) & (z.ravel() < 30 * H))
+    offset = p[nbrs[inner]] - p[inner, None]
+    off_plane = np.abs(np.einsum("nkd,nd->nk", offset, normals[inner])) / np.linalg.norm(offset, axis=2)
+    round_the_tube = np.abs(offset[..., 2]) < 1e-9
+    assert (round_the_tube.sum(axis=1) == 2).all()  # both points next to it round the tube ...
+    assert (off_plane[round_the_tube] > np.sin(np.radians(CONE_DEG))).all()  # ... outside its own cone
+
+
+def test_the_projection_with_normals_keeps_two_sheets_half_a_spacing_apart():
+    p, normals, side = sheets([0.0, -0.5], [1.0, -1.0])
+    inner = interior(p)
+    apart = mls_project(p, normals=normals)[inner, 2]
+    np.testing.assert_allclose(apart, p[inner, 2], atol=1e-9)  # each sheet fitted alone: flat, where it is
+    merged = mls_project(p)[inner, 2]
+    assert np.abs(merged - p[inner, 2]).mean() > 0.15 * H  # fitted as one sheet between them
+
+
+def test_close_sheets_are_flagged_without_normals_and_told_apart_by_normals_facing_away():
+    p, normals, _ = sheets([0.0, -0.5], [1.0, -1.0])
+    flagged, scatter = close_walls(p)
+    assert flagged.mean() > 0.95 and 0.15 < scatter < 0.35  # the offsets +-0.25 spacings from the middle
+    assert not close_walls(p, normals)[0].any()
+    same_way = np.abs(normals)  # both facing up: the normals do not tell them apart
+    assert close_walls(p, same_way)[0].mean() > 0.95
+
+
+def test_one_sheet_is_not_flagged_clean_or_noisy():
+    p, _, _ = sheets([0.0], [1.0])
+    bumpy = p.copy()
+    bumpy[:, 2] += 0.3 * H * np.sin(p[:, 0] / (3 * H))
+    noisy = p + np.random.default_rng(1).normal(scale=0.3 * H, size=p.shape)
+    for cloud in (p, bumpy, noisy):
+        assert not close_walls(cloud)[0].any()
+    assert close_walls(p)[1] < 0.01 and 0.2 < close_walls(noisy)[1] < 0.5  # the noise, in spacings
