@@ -121,9 +121,29 @@ def _load_cloud(cloud_path, sources, err: bool = False):
     return cloud, np.setdiff1d(np.arange(n), far)
 
 
+WARN_SHARE = 0.005  # ambiguous points from which the line saying so is a warning (fewer: a note)
+SCATTER_NOTE = 0.2  # spacings: from this scatter on, a cloud without normals is told that close sheets may go unseen
+
+
 def _embed_cloud(model, cloud, keep, cloud_path, precision):
     """The model's embedding of a cloud file's kept points (with the file's normals, if it has them); a cloud
-    the model cannot take fails naming the file."""
+    the model cannot take fails naming the file. Points where two sheets of the surface come closer than
+    the spacing and the sides cannot be told apart are named in a warning (stderr), as is a scatter that
+    could hide such sheets."""
     with _click_errors(cloud_path):
-        return model.embed(cloud.points[keep], normals=None if cloud.normals is None else cloud.normals[keep],
-                           precision=precision)
+        emb = model.embed(cloud.points[keep], normals=None if cloud.normals is None else cloud.normals[keep],
+                          precision=precision)
+    name = Path(cloud_path).name
+    flagged = 0 if emb.ambiguous is None else int(emb.ambiguous.sum())
+    if flagged:
+        why = ("no normals: give the points' normals (x y z nx ny nz, or a PLY's nx ny nz) to tell the sides apart"
+               if cloud.normals is None else "the file's normals do not face away from each other there")
+        kind = "warning" if flagged >= WARN_SHARE * len(keep) else "note"
+        click.echo(f"{name}: {kind}: {flagged} of {len(keep)} points lie where two sheets of the surface come "
+                   f"closer than the points' spacing and the sides cannot be told apart ({why}): distances from "
+                   "them may run through the wall, short by the way round it (Embedding.ambiguous)", err=True)
+    elif cloud.normals is None and emb.scatter is not None and emb.scatter > SCATTER_NOTE:
+        click.echo(f"{name}: note: the points scatter {emb.scatter:.2f} spacings about a smooth surface (median): "
+                   "two sheets of it closer than a few spacings would not be told apart, nor seen; normals (nx ny "
+                   "nz) would tell them apart", err=True)
+    return emb

@@ -43,13 +43,20 @@ class Embedding:
         faces: the embedded mesh's faces.
         part: for a point cloud, the part of every point (N,): the connected components of the neighbour
             graph it was embedded on (distances between parts mean nothing); None for a mesh.
+        ambiguous: for a point cloud, whether each point (N,) lies where two sheets of surface come closer than
+            the points' spacing and the sides cannot be told apart (no normals, or normals that do not face
+            away there): distances from such a point may run through the wall, short by the way round it
+            (:func:`gegnn.fields.cloud_sides.close_walls`); None for a mesh.
+        scatter: for a point cloud, how far its points lie off a smooth surface, in spacings (median): noise
+            as large as the gap between two sheets hides them from ``ambiguous``; None for a mesh.
     """
 
     def __init__(self, features: Tensor, decoder, scale: float = 1.0, precision: str = "fp32",
                  chunk: int | None = None, vertices: np.ndarray | None = None, faces: np.ndarray | None = None,
-                 part: np.ndarray | None = None):
+                 part: np.ndarray | None = None, ambiguous: np.ndarray | None = None, scatter: float | None = None):
         self.features = features.detach()
         self.part = part
+        self.ambiguous, self.scatter = ambiguous, scatter
         self.vertices = None if vertices is None else np.asarray(vertices, dtype=np.float64)
         self.faces = None if faces is None else np.asarray(faces, dtype=np.int64)
         self._topology = None
@@ -137,18 +144,20 @@ class Embedding:
         return self.blended(corners, weights, vertices, faces)
 
     def blended(self, corners, weights, vertices: np.ndarray | None = None, faces: np.ndarray | None = None,
-                part: np.ndarray | None = None, chunk: int = 1 << 16) -> "Embedding":
+                part: np.ndarray | None = None, chunk: int = 1 << 16, ambiguous: np.ndarray | None = None,
+                scatter: float | None = None) -> "Embedding":
         """An embedding whose row p is the blend of rows ``corners[p]`` (P, 3) with ``weights[p]`` (P, 3; >= 0,
         summing to 1) by the decoder's ``point_codes``: points inside faces (:meth:`at_points`), or the points of
-        a dense cloud between the points of its embedded subset. ``vertices``, ``faces``, ``part``: as for any
-        Embedding."""
+        a dense cloud between the points of its embedded subset. ``vertices``, ``faces``, ``part``,
+        ``ambiguous``, ``scatter``: as for any Embedding."""
         device = self.features.device
         corners = torch.as_tensor(np.asarray(corners, dtype=np.int64), device=device)
         weights = torch.as_tensor(np.asarray(weights, dtype=np.float32), device=device)
         with torch.inference_mode():
             codes = torch.cat([self._blend(corners[s:s + chunk], weights[s:s + chunk])
                                for s in range(0, len(corners), chunk)]) if len(corners) else self.features[:0]
-        return Embedding(codes, self.decoder, self.scale, self.precision, vertices=vertices, faces=faces, part=part)
+        return Embedding(codes, self.decoder, self.scale, self.precision, vertices=vertices, faces=faces, part=part,
+                         ambiguous=ambiguous, scatter=scatter)
 
     def locate(self, points):
         """The closest surface point of each xyz point (P, 3) (in the mesh's units), as
