@@ -55,16 +55,16 @@ class ApproximateGeodesicSolver:
         excess: (N,) optional: each vertex's angle excess for the gates, where its faces' corner angles
             (less 2 pi, the default) do not give it: a cloud's local triangulations overlap, a tufted cover
             counts each corner twice.
-        saddle: the angle excess (radians) from which a vertex is a gate; the default 1e-6 (above
-            rounding): every saddle vertex. A cloud's soup, whose excess comes from overlapping fans, is
-            solved with 0.05.
+        saddle, convex: the gates: saddle vertices of angle excess over ``saddle`` radians and, with
+            ``convex``, convex vertices (the default: every vertex but a plane's). A cloud's soup, whose
+            excess comes from overlapping fans, is solved with saddle 0.05 and no convex gates.
 
     Raises:
         ValueError: naming what is wrong with the mesh (shapes, non-finite coordinates, indices out of
             range, non-manifold edges or vertices, twins not glued back or joining other vertices).
     """
 
-    def __init__(self, vertices, faces, twins=None, excess=None, saddle: float = 1e-6):
+    def __init__(self, vertices, faces, twins=None, excess=None, saddle: float = 1e-6, convex: bool = True):
         from geodata._virtual_source_geodesic import VirtualSources
 
         vertices, faces = _checked_mesh(vertices, faces)
@@ -72,7 +72,7 @@ class ApproximateGeodesicSolver:
         twins = None if twins is None else np.ascontiguousarray(twins, dtype=np.int64)
         excess = None if excess is None else np.ascontiguousarray(excess, dtype=np.float64)
         self._native = VirtualSources(vertices, faces, twins, excess)  # counts non-manifold edges and vertices
-        self.saddle = float(saddle)
+        self.gates = dict(saddle=float(saddle), convex=bool(convex))
         self._mesh = (vertices, faces) if twins is None else None  # what the exact fallback solves
 
     def distances(self, sources, threads: int | None = None) -> np.ndarray:
@@ -100,7 +100,7 @@ class ApproximateGeodesicSolver:
         if threads is None:
             threads = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
         sources = np.ascontiguousarray(sources, dtype=np.int64)
-        fields = self._native.distances(sources, threads=max(1, int(threads)), saddle=self.saddle)
+        fields = self._native.distances(sources, threads=max(1, int(threads)), **self.gates)
         if self._mesh is not None and len(sources):
             _exact_where_impossible(fields, sources, *self._mesh)
         return fields

@@ -22,19 +22,22 @@
 // every unfolding is exact and so are the distances. The probe decides most: the ray to c alone (probe
 // 0) stalls at every face whose middle corner faces the source (0.9% mean error instead of 0.2%).
 //
-// Gates. Where g keeps S although the ray to c passes a saddle endpoint e (its corner angles sum to
-// more than 2 pi + `saddle`, by default any saddle), e becomes a gate of g's source on that side: later
-// faces see S only on the near side of the ray from S to e, and a vertex beyond it gets
-// sigma + |S - e| + |e - x|, the path around e. Without gates, a strip that wraps round a saddle keeps its
-// source and its far vertices get straight paths through the saddle's excess angle that the surface does
-// not have: shortcuts. A gate only where one vertex's excess passed 0.05 rad let strips through smooth
-// saddle regions, whose excess is spread over many vertices (tori 0.6-1.9% short, bent tubes 4-6%).
+// Gates. Where g keeps S although the ray to c passes an endpoint e that is no vertex of a plane (its
+// corner angles sum to more than 2 pi + `saddle`, or, with `convex`, less than 2 pi - FLAT), e becomes a
+// gate of g's source on that side: later faces see S only on the near side of the ray from S to e, and
+// a vertex beyond it gets sigma + |S - e| + |e - x|, the path around e. Without gates, a strip that wraps
+// round a saddle keeps its source and its far vertices get straight paths through the saddle's excess
+// angle that the surface does not have: shortcuts. Gates only where one vertex's excess passed 0.05 rad
+// let strips through smooth saddle regions, whose excess is spread over many vertices (tori 0.6-1.9%
+// short, bent tubes 4-6%); gates at every saddle vertex alone still let them through thin tubes at finer
+// resolutions (a trefoil knot at 22k vertices 1.25% short, at 64k 1.65%), which gates at convex vertices
+// too close.
 //
 // A face keeps one source where the exact solver keeps a window for each family of paths that crosses
 // it: where two families meet, and behind every gate, its vertices come out a little long. The fields end
 // with fast marching's triangle update over the faces (relax_across_faces), which takes most of that back.
-// Measured on the shape zoo and classic meshes (docs/benchmarks.md, "The shape zoo"): 0.07-0.32% mean
-// error, signed -0.12 to +0.29% (long, not short).
+// Measured on the shape zoo and classic meshes (docs/benchmarks.md, "The shape zoo"): 0.07-0.33% mean
+// error, long rather than short.
 
 // Faces wait in Dial's buckets of width `bucket` mean edge lengths, first in first out within a bucket
 // (the default), or in a binary heap, by their source's distance at their centroid; a face improved
@@ -80,6 +83,7 @@ constexpr double ON_EDGE = 1e-12;  // relative to the edge's length: a source on
 constexpr double SEEN = 1e-9;
 constexpr double BENT = 1e-10;
 constexpr double CHORD_SLACK = 1e-3;
+constexpr double FLAT = 1e-6;  // radians: a vertex of excess within it is a vertex of a plane
 
 struct Source {
     double x, y, sigma;  // in the face's frame
@@ -93,6 +97,7 @@ struct Source {
 // is seen only right of the ray to l and left of the ray to r, else the path bends there (NaN: none).
 struct Gates {
     double lx, ly, rx, ry;
+    bool ls, rs;  // whether each is a saddle vertex (a path around a convex one is no geodesic: not detoured)
 };
 
 struct Workspace {
@@ -119,7 +124,7 @@ public:
 
     template <class Q>
     void distances(int64_t original, double* out, Workspace& w, Q& queue, double bucket, double probe,
-                   double saddle, bool relax) const {
+                   double saddle, bool convex, bool relax) const {
         const int source = new_of_old_[original];
         w.from = {position_[3 * source], position_[3 * source + 1], position_[3 * source + 2]};
         w.d.assign(n_, INF);
@@ -149,7 +154,7 @@ public:
             if (key > w.faces[f].best) continue;  // a newer source of f is queued
             ++w.processed;
             if (relax && !w.ordered[f]) w.ordered[f] = 1, w.order.push_back(f);
-            hand_on(f, d, w, queue, probe, saddle);
+            hand_on(f, d, w, queue, probe, saddle, convex);
         }
         for (int64_t v = 0; v < n_; ++v)  // reached only by paths shorter than the segment: the segment
             if (w.short_of_chord[v] && !(d[v] < INF)) d[v] = chord(w, static_cast<int>(v)) / (1.0 - CHORD_SLACK);
@@ -227,6 +232,12 @@ private:
     }
 
 
+    // Whether vertex v, passed by a kept source's ray, becomes a gate: a saddle (angle excess over `saddle`)
+    // or, with `convex`, a convex vertex (a deficit over FLAT: not a vertex of a plane).
+    bool gate(int v, double saddle, bool convex) const {
+        return excess_[v] > saddle || (convex && excess_[v] < -FLAT);
+    }
+
     // The straight distance from the source to vertex v, less a relative CHORD_SLACK: no path is shorter,
     // and the fields' own error is allowed for (a straight line on a saddle patch comes out 0.04% short).
     double chord(const Workspace& w, int v) const {
@@ -238,7 +249,7 @@ private:
     // Face f hands its source to the faces across its three edges (in each edge's frame in the face g
     // across it: A = (0, 0), B = (L, 0), C = (cx, cy) above).
     template <class Q>
-    void hand_on(int f, double* d, Workspace& w, Q& queue, double probe, double saddle) const {
+    void hand_on(int f, double* d, Workspace& w, Q& queue, double probe, double saddle, bool convex) const {
         const Source from = w.faces[f];
         for (int k = 0; k < 3; ++k) {
             const Across& u = across_[3 * f + k];
@@ -251,11 +262,12 @@ private:
             double sigma = from.sigma;
             // the gates, left and right of the rays in this frame (a reflection swaps the sides)
             Point gl = {NAN, NAN}, gr = {NAN, NAN};
+            bool ls = false, rs = false;
             if (from.gated) {
                 const Gates& gates = w.gates[f];
-                if (!std::isnan(gates.lx)) gl = u.map({gates.lx, gates.ly});
-                if (!std::isnan(gates.rx)) gr = u.map({gates.rx, gates.ry});
-                if (u.reflects()) std::swap(gl, gr);
+                if (!std::isnan(gates.lx)) gl = u.map({gates.lx, gates.ly}), ls = gates.ls;
+                if (!std::isnan(gates.rx)) gr = u.map({gates.rx, gates.ry}), rs = gates.rs;
+                if (u.reflects()) std::swap(gl, gr), std::swap(ls, rs);
             }
             // where the rays from the source to C and to the probe point meet the edge's line; a source
             // on C's side sees nothing through the edge: bend at the endpoint nearer g's centroid
@@ -299,7 +311,7 @@ private:
             // surface (a strip grazing a strongly convex source's fan gave 22% short values 2-7 edges from it)
             if (!(to_c < d[u.vc])) {
             } else if (to_c >= chord(w, u.vc)) {
-                d[u.vc] = to_c, w.detoured[u.vc] = c_gate || from.detoured;
+                d[u.vc] = to_c, w.detoured[u.vc] = (c_gate == 1 ? ls : c_gate == 2 && rs) || from.detoured;
             } else {
                 w.short_of_chord[u.vc] = 1;
             }
@@ -320,10 +332,10 @@ private:
                 if (!(sigma < INF)) continue;
                 gl = gr = {NAN, NAN};
                 tie = 1.0 + BENT;
-            } else if (straight && !c_gate && c_x < lo && excess_[vertex(false)] > saddle) {
-                gl = {0.0, 0.0};
-            } else if (straight && !c_gate && c_x > hi && excess_[vertex(true)] > saddle) {
-                gr = {L, 0.0};
+            } else if (straight && !c_gate && c_x < lo && gate(vertex(false), saddle, convex)) {
+                gl = {0.0, 0.0}, ls = excess_[vertex(false)] > FLAT;
+            } else if (straight && !c_gate && c_x > hi && gate(vertex(true), saddle, convex)) {
+                gr = {L, 0.0}, rs = excess_[vertex(true)] > FLAT;
             }
             if (!straight && !p_gate) gl = gr = {NAN, NAN};
             const double at_m = (sigma + norm(mx - t.x, my - t.y)) * tie;
@@ -334,10 +346,10 @@ private:
                 auto face = [&](Point q) { return Point{a.x + q.x * ex - q.y * ey, a.y + q.x * ey + q.y * ex}; };
                 const Point s = face(t);
                 const bool gated = !std::isnan(gl.x) || !std::isnan(gr.x);
-                to = {s.x, s.y, sigma, at_m, u.kg(), gated, p_gate || from.detoured};
+                to = {s.x, s.y, sigma, at_m, u.kg(), gated, (p_gate == 1 ? ls : p_gate == 2 && rs) || from.detoured};
                 if (gated) {
                     const Point l = face(gl), r = face(gr);
-                    w.gates[g] = {l.x, l.y, r.x, r.y};
+                    w.gates[g] = {l.x, l.y, r.x, r.y, ls, rs};
                 }
                 queue.push(at_m, g);
             }
@@ -360,7 +372,8 @@ struct Choices {
     std::string queue = "buckets";  // or "heap"
     double bucket = 0.5;            // the buckets' width in mean edge lengths
     double probe = 1.0;             // the probe point: 0 the far vertex, 1 the face's centroid
-    double saddle = 1e-6;           // the angle excess (radians) from which a vertex is a gate (1e-6: every saddle)
+    double saddle = FLAT;           // the angle excess (radians) from which a saddle vertex is a gate
+    bool convex = true;             // convex vertices are gates too
     bool relax = true;              // the fields end with relax_across_faces
 };
 
@@ -385,9 +398,9 @@ Out solve(const VirtualSources& surface, const Sources& sources, int64_t threads
             Workspace w;
             for (size_t i; (i = next++) < k;) {
                 if (c.queue == "heap")
-                    surface.distances(src[i], out + i * n, w, w.heap, c.bucket, c.probe, c.saddle, c.relax);
+                    surface.distances(src[i], out + i * n, w, w.heap, c.bucket, c.probe, c.saddle, c.convex, c.relax);
                 else
-                    surface.distances(src[i], out + i * n, w, w.buckets, c.bucket, c.probe, c.saddle, c.relax);
+                    surface.distances(src[i], out + i * n, w, w.buckets, c.bucket, c.probe, c.saddle, c.convex, c.relax);
             }
             processed += w.processed;
         };
@@ -421,15 +434,16 @@ NB_MODULE(_virtual_source_geodesic, m) {
         .def(
             "distances",
             [](const VirtualSources& self, Sources sources, int64_t threads, const std::string& queue, double bucket,
-               double probe, double saddle, bool relax) {
-                return solve(self, sources, threads, Choices{queue, bucket, probe, saddle, relax}, nullptr);
+               double probe, double saddle, bool convex, bool relax) {
+                return solve(self, sources, threads, Choices{queue, bucket, probe, saddle, convex, relax}, nullptr);
             },
             nb::arg("sources"), nb::arg("threads") = 1, nb::arg("queue") = "buckets", nb::arg("bucket") = 0.5,
-            nb::arg("probe") = 1.0, nb::arg("saddle") = 1e-6, nb::arg("relax") = true,
+            nb::arg("probe") = 1.0, nb::arg("saddle") = FLAT, nb::arg("convex") = true, nb::arg("relax") = true,
             "Distances (len(sources), N) float64 from each source vertex to every vertex; inf where unreached.\n"
             "queue ('buckets' or 'heap'), bucket (width in mean edge lengths), probe (the test point: 0 the far\n"
-            "vertex, 1 the face's centroid), saddle (the angle excess of a gate, radians), relax (the fields end\n"
-            "relaxed across the faces; a glued soup's along its edges whatever it says): the design choices.")
+            "vertex, 1 the face's centroid), saddle (the angle excess from which a saddle vertex is a gate,\n"
+            "radians), convex (convex vertices are gates too), relax (the fields end relaxed across the faces; a\n"
+            "glued soup's along its edges whatever it says): the design choices.")
         .def(
             "processed",
             [](const VirtualSources& self, Sources sources) {

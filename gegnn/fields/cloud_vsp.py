@@ -118,7 +118,7 @@ class CloudVirtualSources:
         faces, twins = (paired_mesh if gluing == "pairs" else cover_mesh)(points, agreed_soup(triangles))
         self.n_points = len(points)
         self._solver = ApproximateGeodesicSolver(points, faces, twins=twins, excess=own_excess(points, triangles),
-                                                 saddle=CLOUD_SADDLE)
+                                                 saddle=CLOUD_SADDLE, convex=False)
 
     def distances(self, sources, threads: int = 1) -> np.ndarray:
         """Distances (N, len(sources)) from each source point to every point (``inf`` on other parts)."""
