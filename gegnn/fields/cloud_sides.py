@@ -45,15 +45,18 @@ AMBIGUOUS_SHARE = 0.3  # a point is ambiguous where this share of its LAYER_K ne
 
 
 def facing_ranks(points: np.ndarray, normals: np.ndarray, rows: np.ndarray, nbrs: np.ndarray,
-                 sin_cone: float) -> np.ndarray:
+                 sin_cone: float, dist: np.ndarray | None = None) -> np.ndarray:
     """Each candidate's rank (R, m) as a neighbour of its row's point ``rows`` (R,): 0 on its sheet (facing
     the same side, within the cone about the plane normal to their mean normal), 1 facing the same side
-    only, 2 else."""
+    only, 2 else. ``dist``: the candidates' distances (R, m), where known."""
+    theirs = normals[nbrs]
+    facing = np.einsum("nkd,nd->nk", theirs, normals[rows]) > 0
+    if sin_cone >= 1:  # every offset within the cone
+        return np.where(facing, 0, 2).astype(np.int8)
     offset = points[nbrs] - points[rows, None]
-    mean = normals[nbrs] + normals[rows, None]
-    facing = np.einsum("nkd,nd->nk", normals[nbrs], normals[rows]) > 0
-    along = (np.abs(np.einsum("nkd,nkd->nk", mean, offset))
-             < sin_cone * np.linalg.norm(mean, axis=2) * np.linalg.norm(offset, axis=2))
+    length = np.linalg.norm(offset, axis=2) if dist is None else dist
+    mean = theirs + normals[rows, None]
+    along = np.abs(np.einsum("nkd,nkd->nk", mean, offset)) < sin_cone * np.linalg.norm(mean, axis=2) * length
     return np.where(facing, np.where(along, 0, 1), 2).astype(np.int8)
 
 
@@ -62,21 +65,33 @@ def facing_neighbors(points: np.ndarray, normals: np.ndarray, k: int, cone_deg: 
     """(N, k): each point's k nearest on its own sheet (module docstring) among its ``candidates`` (6k)
     nearest, the rows with fewer filled with the nearest facing its side, then the nearest others; nearest
     first within each rank; and their distances (N, k). ``cone_deg`` None: the nearest facing its side
-    (no cone)."""
+    (no cone). Most rows are settled by their 2k nearest (k on their sheet among them): the rest only
+    look further."""
     from scipy.spatial import cKDTree
 
     points = np.ascontiguousarray(points, dtype=np.float64)
     normals = np.ascontiguousarray(normals, dtype=np.float64)
-    m = min(6 * k if candidates is None else candidates, len(points) - 1)
-    dist, nbrs = cKDTree(points).query(points, m + 1, workers=threads.count())
-    dist, nbrs = dist[:, 1:], nbrs[:, 1:].astype(np.int64)
-    sin_cone = 2.0 if cone_deg is None else float(np.sin(np.radians(cone_deg)))  # 2: every offset within
-    order = np.empty((len(points), min(k, m)), dtype=np.int64)
-    for s in range(0, len(points), BLOCK):
-        rows = np.arange(s, min(s + BLOCK, len(points)))
-        rank = facing_ranks(points, normals, rows, nbrs[rows], sin_cone)
-        order[rows] = np.argsort(rank, axis=1, kind="stable")[:, :k]
-    return np.take_along_axis(nbrs, order, axis=1), np.take_along_axis(dist, order, axis=1)
+    most = min(6 * k if candidates is None else candidates, len(points) - 1)
+    k = min(k, most)
+    sin_cone = 1.0 if cone_deg is None else float(np.sin(np.radians(cone_deg)))
+    tree = cKDTree(points)
+    out_nbrs, out_dist = np.empty((len(points), k), dtype=np.int64), np.empty((len(points), k))
+    rows = np.arange(len(points))
+    for m in sorted({min(2 * k, most), most}):
+        dist, nbrs = tree.query(points[rows], m + 1, workers=threads.count())
+        dist, nbrs = dist[:, 1:], nbrs[:, 1:].astype(np.int64)
+        settled = np.zeros(len(rows), dtype=bool)
+        for s in range(0, len(rows), BLOCK):
+            block = slice(s, s + BLOCK)
+            rank = facing_ranks(points, normals, rows[block], nbrs[block], sin_cone, dist[block])
+            order = np.argsort(rank, axis=1, kind="stable")[:, :k]
+            out_nbrs[rows[block]] = np.take_along_axis(nbrs[block], order, axis=1)
+            out_dist[rows[block]] = np.take_along_axis(dist[block], order, axis=1)
+            settled[block] = (rank == 0).sum(axis=1) >= k
+        rows = rows[~settled]
+        if not len(rows):
+            break
+    return out_nbrs, out_dist
 
 
 def two_sheets(points: np.ndarray, k: int = LAYER_K) -> dict:
