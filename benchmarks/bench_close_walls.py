@@ -23,8 +23,9 @@ same sources, alone; ``model``: ``GeGnn.pretrained(--model)``'s answers (its emb
 embedding marks ambiguous (``Embedding.ambiguous``, where the model has
 one) and ``model ok`` its MRE over the pairs of unflagged points.
 
-``--store`` adds the validation store's meshes named by ``--meshes`` (id prefixes; their stored exact pairs,
-``--pairs`` of them), their vertices as clouds without and with the mesh's vertex normals. One torch thread.
+``--store`` adds the validation store's meshes named by ``--meshes`` (id prefixes, "" for all; their stored
+exact pairs, ``--pairs`` of them), their vertices as clouds, clean and noisy, without and with the mesh's
+vertex normals. One torch thread.
 """
 from __future__ import annotations
 
@@ -139,24 +140,29 @@ def store_rows(model, args):
     from gegnn.training.data import GeodesicStore
 
     store = GeodesicStore(args.store)
-    for mesh_id in store.mesh_ids:
+    stems = [mesh_id.rsplit("-", 1)[0] for mesh_id in store.mesh_ids]
+    for mesh_id, stem in zip(store.mesh_ids, stems):
         if not any(mesh_id.startswith(m) for m in args.meshes):
             continue
+        name = stem if stems.count(stem) == 1 else mesh_id[:len(stem) + 5]  # dragon-4af5, dragon-fd96
         g = store.geometry(mesh_id)
         pairs, exact = store.pairs(mesh_id)
         pick = np.random.default_rng(0).permutation(len(pairs))[:args.pairs]
         pairs, exact = pairs[pick].astype(np.int64), exact[pick]
         keep = pairs[:, 0] != pairs[:, 1]
         pairs, exact = pairs[keep], exact[keep]
-        points = np.asarray(g.vertices, dtype=np.float64)
-        for given in (False, True):
+        vertices = np.asarray(g.vertices, dtype=np.float64)
+        noise = np.random.default_rng([args.seed, len(vertices)]).normal(
+            scale=args.noise * np.ptp(vertices, axis=0).max(), size=vertices.shape)
+        for noisy, given in ((False, False), (False, True), (True, False), (True, True)):
+            points = vertices + noise if noisy else vertices
             emb = model.embed(points, normals=np.asarray(g.normals, dtype=np.float64) if given else None)
             d = emb.distance(pairs[:, 0], pairs[:, 1])
             flags = getattr(emb, "ambiguous", None)
             flags = np.zeros(len(points), bool) if flags is None else np.asarray(flags, bool)
             ok = ~flags[pairs].any(axis=1)
             d[emb.part[pairs[:, 0]] != emb.part[pairs[:, 1]]] = np.inf
-            yield dict(cloud=mesh_id.rsplit("-", 1)[0], ratio=None, noisy=False, normals=given,
+            yield dict(cloud=name, ratio=None, noisy=noisy, normals=given,
                        points=len(points), heat=float("nan"), fields=float("nan"), model=mre(d, exact),
                        apart=float(np.mean(~np.isfinite(d))),
                        flagged=float(flags.mean()), model_ok=mre(d[ok], exact[ok]) if ok.any() else float("nan"),
