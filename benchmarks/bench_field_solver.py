@@ -27,9 +27,9 @@ near an edge (needle triangles, angles down to ~1 degree).
 --sweep: decimated-max at 5k, 20k, 80k, 320k, 1.35M vertices (2 sources; the heat method and the exact solver up to 80k).
 --ablation: the solver's design choices on the real meshes (probe point, saddle gates, queue, bucket width).
 --zoo: the shapes of geodata.zoo (tori, bent tubes, a coil, a trefoil, a T pipe, a saddle patch, a genus-3 plate, a
-filleted part, slivers, noise) and six classic meshes, 4 sources each: the mean, signed mean and 99th percentile of
-the relative error against the exact solver and ms a field, of today's solver and of the solver before gates at
-every saddle vertex (saddle 0.05 rad, no relaxation).
+filleted part, slivers, noise), the tubes also at 2 and 4 times the vertices, and six classic meshes, 4 sources each:
+the mean, signed mean and 99th percentile of the relative error against the exact solver and ms a field, of today's
+solver and of 0.3.2's choices (gates only at saddle vertices of excess over 0.05 rad, no relaxation).
 --raw: every mesh of ../shared/meshes (both splits) under 10k vertices that is a closed manifold as loaded
 (the exact solver's condition), unremeshed: CAD parts with needle triangles, furniture; 3 sources each.
 --lower-bound: issue 55's table: the triangle-inequality lower bound LB(i, j) = max_k |d(i, l_k) - d(j, l_k)|
@@ -62,6 +62,7 @@ from gegnn.fields.heat import HeatDistance
 from machine import cpu_description  # benchmarks/ is on sys.path when a script there runs
 
 DEV = Path(__file__).resolve().parents[1] / ".." / "shared" / "meshes" / "dev"
+CLASSIC = ["max", "homer", "camel", "penguin", "horse", "cat"]
 REAL = {"max": "libigl-tutorial-data/decimated-max.obj", "homer": "common-3d-test-models/homer.obj",
         "camel": "isoblend/camel.obj", "cheburashka": "common-3d-test-models/cheburashka.obj",
         "scorpion": "odedstein-meshes/scorpion_low_resolution.obj", "penguin": "odedstein-meshes/penguin.obj",
@@ -321,17 +322,18 @@ def zoo_table(size: float, repeat: int):
     from geodata._exact_geodesic import Surface
     from geodata.zoo import ZOO, zoo_mesh
 
-    before = dict(saddle=0.05, relax=False)
-    print(f"\nthe zoo at size {size} and six classic meshes, 4 sources each: mean / signed mean / 99th percentile of "
-          "the relative error against exact, ms a field (one core)")
+    before = dict(saddle=0.05, convex=False, relax=False)
+    print(f"\nthe zoo at size {size}, the tubes finer, and six classic meshes, 4 sources each: mean / signed mean / "
+          "99th percentile of the relative error against exact, ms a field (one core)")
     print("| shape | vertices | before: mean | signed | p99 | ms | today: mean | signed | p99 | ms |\n"
           "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
-    for name in [*ZOO, "max", "homer", "camel", "penguin", "horse", "cat"]:
-        v, f = load(name) if name in REAL else zoo_mesh(name, size)
+    finer = [("trefoil", 2 * size), ("trefoil", 4 * size), ("coil", 2 * size), ("u-bend", 2 * size)]
+    for name, at in [*((n, size) for n in ZOO), *finer, *((n, None) for n in CLASSIC)]:
+        v, f = load(name) if name in REAL else zoo_mesh(name, at)
         sources = np.random.default_rng(0).choice(len(v), 4, replace=False).astype(np.int64)
         exact = Surface(v, f.astype(np.int32)).distances(sources)  # takes boundaries too (the saddle patch)
         keep = exact > 0
-        solver, cells = VirtualSources(v, f), [name, f"{len(v):,}"]
+        solver, cells = VirtualSources(v, f), [name if at in (size, None) else f"{name} x{at / size:g}", f"{len(v):,}"]
         for choice in (before, {}):
             r = (solver.distances(sources, **choice)[keep] - exact[keep]) / exact[keep]
             ms = best_of(lambda: solver.distances(sources[:1], **choice), repeat) * 1e3

@@ -16,15 +16,13 @@ import warnings
 import numpy as np
 import torch
 
-from bench_field_solver import REAL, load
+from bench_field_solver import CLASSIC, REAL, load
 from geodata._exact_geodesic import Surface
 from geodata.approximate_geodesic import ApproximateGeodesicSolver
 from geodata.zoo import ZOO, zoo_mesh
 from gegnn import GeGnn
 from gegnn.fields.heat import HeatDistance
 from machine import cpu_description
-
-CLASSIC = ["max", "homer", "camel", "penguin", "horse", "cat"]
 
 
 def mean_error(fields: np.ndarray, exact: np.ndarray) -> float:

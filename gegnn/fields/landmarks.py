@@ -36,6 +36,7 @@ import numpy as np
 
 from geodata.mesh import Mesh, label_groups, unique_edges, vertex_components
 
+from .. import threads
 from .heat import HeatDistance
 
 __all__ = ["LandmarkFields", "landmark_fields", "landmark_solver", "farthest_point_fields",
@@ -149,8 +150,8 @@ def landmark_solver(vertices, faces, k: int, t_coef: float = T_COEF, batch: int 
 
 def _vsp_field(vertices, faces, t_coef: float, fields: int):
     """``fields(sources) -> (N, len(sources))`` by virtual source propagation
-    (:class:`geodata.approximate_geodesic.ApproximateGeodesicSolver`, 0.1-0.3% from exact, one thread: the
-    embedding's network runs beside it). A part it refuses (an edge of three or more faces, a pinched vertex:
+    (:class:`geodata.approximate_geodesic.ApproximateGeodesicSolver`, 0.1-0.3% from exact), the sources on
+    torch's threads (the embedding's network, beside them, on one fewer: :mod:`gegnn.threads`). A part it refuses (an edge of three or more faces, a pinched vertex:
     a proxy's decimation of a 1M-vertex mesh can make a few) is solved on its
     :func:`geodata.approximate_geodesic.manifold_copy`, each vertex at the least of its copies' distances
     and a source at a split vertex the source on every fan (each copy solved as one),
@@ -161,7 +162,7 @@ def _vsp_field(vertices, faces, t_coef: float, fields: int):
 
     try:
         solver = ApproximateGeodesicSolver(vertices, faces)
-        return lambda sources: solver.distances(np.asarray(sources, dtype=np.int64), threads=1).T
+        return lambda sources: solver.distances(np.asarray(sources, dtype=np.int64), threads=threads.count()).T
     except ValueError as exc:
         reason = str(exc)
     v, f, origin, set_aside = manifold_copy(vertices, faces)
@@ -181,7 +182,7 @@ def _vsp_field(vertices, faces, t_coef: float, fields: int):
         # copy, unreached from the first) are solved from their own copy, each column the least over them.
         copies = n + np.flatnonzero(np.isin(origin[n:], sources))  # rare: a split source's other fans
         copy, column = np.nonzero(origin[copies][:, None] == sources[None, :])
-        d = solver.distances(np.concatenate([sources, copies[copy]]), threads=1)  # (S + its copies, N')
+        d = solver.distances(np.concatenate([sources, copies[copy]]), threads=threads.count())  # (S + copies, N')
         out = d[:len(sources)]
         np.minimum.at(out, column, d[len(sources):])
         out = out.T  # (N', S): each vertex at the least of its copies' distances
