@@ -206,17 +206,27 @@ private:
             if (!(w.detoured[F_[3 * f]] || w.detoured[F_[3 * f + 1]] || w.detoured[F_[3 * f + 2]])) continue;
             for (int k = 0; k < 3; ++k) {
                 const int c = F_[3 * f + k];
+                if (upstream(f, k, d)) continue;
                 const double to_c = across_face(f, k, d);
                 if (to_c < d[c] * (1.0 - SETTLED) && to_c >= chord(w, c)) d[c] = to_c, w.detoured[c] = 1;
             }
         }
         w.before.assign(d, d + n_);
+        const double* b = w.before.data();
         for (const int f : w.order)
             for (int k = 0; k < 3; ++k) {
                 const int c = F_[3 * f + k];
-                const double to_c = across_face(f, k, w.before.data());
+                if (upstream(f, k, b)) continue;
+                const double to_c = across_face(f, k, b);
                 if (to_c < d[c] && to_c >= chord(w, c)) d[c] = to_c;
             }
+    }
+
+    // Whether face f's corner k is no farther than both others: a path to it does not cross the face, and
+    // its update is not tried (a fifth of the relaxation's time; 1e-5 of the values move, by 1e-15 on
+    // classic meshes and up to 0.5% on slivers).
+    bool upstream(int f, int k, const double* d) const {
+        return d[F_[3 * f + k]] <= std::min(d[F_[3 * f + (k + 1) % 3]], d[F_[3 * f + (k + 2) % 3]]);
     }
 
     // The triangle update of face f's corner k from the other two corners' values d (INF where it has none).
