@@ -28,8 +28,9 @@ __all__ = ["GeGnnConfig", "GeGnn", "DistanceDecoder", "LandmarkDecoder", "Spectr
 
 # Shipped models, in gegnn/weights/, made by `gegnn export` (docs/model-card.md); the first is the default.
 PRETRAINED = {
-    "landmark": "gegnn-landmark-v3.safetensors",  # landmark-guided, K = 256 fields by virtual sources: the most accurate
-    "landmark-v2": "gegnn-landmark-v2.safetensors",  # the previous default, K = 256 heat-method fields
+    "landmark": "gegnn-landmark-v4.safetensors",  # landmark-guided, K = 256 fields by virtual sources: the most accurate
+    "landmark-v3": "gegnn-landmark-v3.safetensors",  # the previous default, trained on 0.3.2's fields, no tubes
+    "landmark-v2": "gegnn-landmark-v2.safetensors",  # the one before, K = 256 heat-method fields
     "landmark-v1": "gegnn-landmark-v1.safetensors",  # the one before, K = 128
     "paper": "gegnn-classic-v1.safetensors",      # the paper's model (no landmarks)
     "biharmonic": "gegnn-biharmonic-v1.safetensors",  # biharmonic distances: spectral codes + Weyl tail
@@ -282,8 +283,9 @@ class GeGnn(nn.Module):
 
         Args:
             name: a key of :data:`PRETRAINED`: ``"landmark"`` (the default: the most accurate geodesic
-                model, landmark-v3: K = 256 landmark fields by virtual source propagation), ``"landmark-v2"``
-                (the previous default, heat-method fields), ``"landmark-v1"`` (K = 128), ``"paper"``
+                model, landmark-v4: K = 256 landmark fields by virtual source propagation, trained with tubes,
+                tori and knots), ``"landmark-v3"`` (the previous default), ``"landmark-v2"`` (heat-method
+                fields), ``"landmark-v1"`` (K = 128), ``"paper"``
                 (the paper's model), ``"biharmonic"`` (biharmonic distances), ``"points"`` (point clouds:
                 ``model.embed(points)``; points-v3, landmark-v3's weights on fields by virtual sources),
                 ``"points-v2"`` or ``"points-v1"`` (the previous ones, cloud heat-method fields).

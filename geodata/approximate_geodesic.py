@@ -55,9 +55,10 @@ class ApproximateGeodesicSolver:
         excess: (N,) optional: each vertex's angle excess for the gates, where its faces' corner angles
             (less 2 pi, the default) do not give it: a cloud's local triangulations overlap, a tufted cover
             counts each corner twice.
-        saddle, convex: the gates: saddle vertices of angle excess over ``saddle`` radians and, with
-            ``convex``, convex vertices (the default: every vertex but a plane's). A cloud's soup, whose
-            excess comes from overlapping fans, is solved with saddle 0.05 and no convex gates.
+        saddle: the angle excess (radians) from which a saddle vertex is a gate (default: any, above
+            rounding).
+        convex: convex vertices are gates too (the default: every vertex but a plane's is one). A cloud's
+            soup, whose excess comes from overlapping fans, is solved with saddle 0.05 and no convex gates.
 
     Raises:
         ValueError: naming what is wrong with the mesh (shapes, non-finite coordinates, indices out of

@@ -26,10 +26,18 @@ gegnn export "$runs/lm384-v3/best.safetensors" "$runs/gegnn-landmark-v3.safetens
 bash pipelines/landmark/more_landmarks.sh "$data" "$runs" 256 "$weights/gegnn-landmark-v2.safetensors" lm256-v3 vsp
 gegnn export "$runs/lm256-v3/best.safetensors" "$weights/gegnn-landmark-v3.safetensors" --dtype fp16
 gegnn export "$weights/gegnn-landmark-v3.safetensors" "$weights/gegnn-points-v3.safetensors" --neighbors 8
+# landmark-v4 (K = 256, the default since 0.3.3): v3's weights on the fields of 0.3.3 (gates at every vertex
+# but a plane's, fast-marching updates), with 80 generated tori, bent tubes, helices and torus knots added to
+# the training data (their geodesics wrap round saddle regions, which the classic meshes barely have)
+python pipelines/landmark/zoo_meshes.py "$data/zoo-train" 80 0
+geodata prepare "$data/zoo-train" "$data/train.zarr" --pairs 100000 --log "$data/prepare-train.log"
+bash pipelines/landmark/more_landmarks.sh "$data" "$runs" 256 "$weights/gegnn-landmark-v3.safetensors" lm256-v4 vsp
+gegnn export "$runs/lm256-v4/best.safetensors" "$weights/gegnn-landmark-v4.safetensors" --dtype fp16
 # Each run records the weights it started from by path and sha256 (train_config init, init_sha256): always a
 # file here, never a shipped model's name, which moves to each new default. Checked on the files just shipped:
 python -m pytest -q tests/gegnn/test_weights_provenance.py -k started_from
 
+python benchmarks/ablation_k.py "$data/val.zarr" "landmark-v4=$weights/gegnn-landmark-v4.safetensors" --record
 python benchmarks/ablation_k.py "$data/val.zarr" "landmark-v3=$weights/gegnn-landmark-v3.safetensors" --record
 python benchmarks/ablation_k.py "$data/val.zarr" "landmark-v2=$weights/gegnn-landmark-v2.safetensors" \
     "landmark-v1=$weights/gegnn-landmark-v1.safetensors" --record

@@ -23,11 +23,12 @@ def test_weights_are_fp16_safetensors_under_16_mib(name):
 def test_default_is_the_landmark_model_and_names_are_checked():
     default, v2 = GeGnn.pretrained().config, GeGnn.pretrained("landmark-v2").config
     assert (default.landmarks, default.landmark_fields) == (256, "vsp") and (v2.landmarks, v2.landmark_fields) == (256, "heat")
+    assert GeGnn.pretrained("landmark-v3").config.landmark_fields == "vsp"
     assert GeGnn.pretrained("landmark-v1").config.landmarks == 128
     points, points_v2 = GeGnn.pretrained("points").config, GeGnn.pretrained("points-v2").config
     assert (points.landmarks, points.landmark_fields) == (256, "vsp") and (points_v2.landmarks, points_v2.landmark_fields) == (256, "heat")
     assert GeGnn.pretrained("points-v1").config.landmarks == 128
-    with pytest.raises(ValueError, match="shipped: landmark, landmark-v2, landmark-v1, paper, biharmonic, points, points-v2, points-v1"):
+    with pytest.raises(ValueError, match="shipped: landmark, landmark-v3, landmark-v2, landmark-v1, paper, biharmonic, points, points-v2, points-v1"):
         GeGnn.pretrained("nonexistent")
 
 
