@@ -96,7 +96,7 @@ def test_clear_errors(soup, ckpt, tmp_path):
     r = runner.invoke(main, ["query", ckpt, path, "--source", "0", "-o", str(tmp_path / "afile" / "f.npy")])
     assert r.exit_code != 0 and "f.npy: cannot write there" in r.output and "Traceback" not in r.output
     r = runner.invoke(main, ["query", "--pretrained", "papr", path, "--source", "0"])
-    assert r.exit_code != 0 and "no pretrained model 'papr'; shipped: landmark, landmark-v2, landmark-v1, paper" in r.output
+    assert r.exit_code != 0 and "no pretrained model 'papr'; shipped: landmark, landmark-v3, landmark-v2, landmark-v1, paper" in r.output
     r = runner.invoke(main, ["query", "--pretrained", str(tmp_path / "missing.obj"), "--source", "0"])
     assert r.exit_code != 0 and "missing.obj: no such file" in r.output
     with pytest.raises(ValueError, match="two integer columns"):
