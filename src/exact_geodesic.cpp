@@ -53,6 +53,7 @@
 #include <vector>
 
 #include "exact_windows.h"
+#include "vertex_corners.h"
 
 namespace nb = nanobind;
 
@@ -72,7 +73,7 @@ public:
             if (F_[i] < 0 || F_[i] >= n) throw std::invalid_argument("face index out of range");
         build_twins();
         build_frames(V);
-        build_vertex_faces();
+        vertex_corners(F_, n_, vf_start_, vf_);
         d_.resize(n);
         emitted_.resize(n);
         double total = 0.0;
@@ -177,15 +178,6 @@ private:
         }
         for (int64_t v = 0; v < n_; ++v)
             if (angle_sum[v] > 2.0 * M_PI * (1.0 + 1e-9)) pseudo_[v] = 1;  // a geodesic passes a flat vertex straight
-    }
-
-    void build_vertex_faces() {
-        vf_start_.assign(n_ + 1, 0);
-        for (int h = 0; h < 3 * m_; ++h) ++vf_start_[F_[h] + 1];
-        for (int64_t v = 0; v < n_; ++v) vf_start_[v + 1] += vf_start_[v];
-        vf_.resize(3 * m_);
-        std::vector<int> fill(vf_start_.begin(), vf_start_.end() - 1);
-        for (int h = 0; h < 3 * m_; ++h) vf_[fill[F_[h]]++] = h;
     }
 
     // A vertex that lights its edges from now on, for this source, like a pseudo-source (rule 4).

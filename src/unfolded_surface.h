@@ -14,6 +14,8 @@
 #include <utility>
 #include <vector>
 
+#include "vertex_corners.h"
+
 namespace vsp {
 
 constexpr double INF = std::numeric_limits<double>::infinity();
@@ -134,7 +136,7 @@ public:
         } else {
             build_unfoldings();
         }
-        build_vertex_faces();
+        vertex_corners(F_, n_, vf_start_, vf_);
         if (twins) {  // a soup's vertices may join several fans: paths bend there (d of the vertex)
             build_edges();
             return;
@@ -303,7 +305,7 @@ protected:
 
     // Vertices whose faces fall into two or more fans joined by no edge through the vertex: a source's
     // paths would have to pass through the vertex itself, which no face hands on. A vertex's corners are
-    // listed in order (build_vertex_faces), so the corner of the face across an edge is found by bisection:
+    // listed in order (vertex_corners), so the corner of the face across an edge is found by bisection:
     // n log n in the valence (a search through the list made a 40k-face fan take seconds).
     int64_t count_pinched() const {
         int64_t pinched = 0;
@@ -333,14 +335,6 @@ protected:
         }
         return pinched;
     }
-
-    void build_vertex_faces() {
-        vf_start_.assign(n_ + 1, 0);
-        for (int h = 0; h < 3 * m_; ++h) ++vf_start_[F_[h] + 1];
-        for (int64_t v = 0; v < n_; ++v) vf_start_[v + 1] += vf_start_[v];
-        vf_.resize(3 * m_);
-        std::vector<int> fill(vf_start_.begin(), vf_start_.end() - 1);
-        for (int h = 0; h < 3 * m_; ++h) vf_[fill[F_[h]]++] = h;
-    }};
+};
 
 }  // namespace vsp
