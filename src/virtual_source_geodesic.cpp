@@ -85,16 +85,26 @@ constexpr double BENT = 1e-10;
 constexpr double CHORD_SLACK = 1e-3;
 constexpr double FLAT = 1e-6;  // radians: a vertex of excess within it is a vertex of a plane
 
+// The design choices the benchmark ablates (benchmarks/bench_field_solver.py --ablation).
+struct Choices {
+    std::string queue = "buckets";  // or "heap"
+    double bucket = 0.5;            // the buckets' width in mean edge lengths
+    double probe = 1.0;             // the probe point: 0 the far vertex, 1 the face's centroid
+    double saddle = FLAT;           // the angle excess (radians) from which a saddle vertex is a gate
+    bool convex = true;             // convex vertices are gates too
+    bool relax = true;              // the fields end with relax_across_faces
+};
+
 struct Source {
     double x, y, sigma;  // in the face's frame
     double best;         // its distance at the face's centroid
     int entered;         // the edge it came through, which it is not handed back across (-1: none)
     int gated;           // whether it has gates (Workspace::gates)
-    int detoured = 0;    // whether it was bent around a gate on its way (its distances may come out long)
+    int detoured = 0;    // whether it was bent around a saddle gate on its way (its distances may come out long)
 };
 
-// Saddle vertices a source's rays passed on their left (l) and right (r), in the face's frame: a point
-// is seen only right of the ray to l and left of the ray to r, else the path bends there (NaN: none).
+// Vertices (not a plane's) a source's rays passed on their left (l) and right (r), in the face's frame: a
+// point is seen only right of the ray to l and left of the ray to r, else the path bends there (NaN: none).
 struct Gates {
     double lx, ly, rx, ry;
     bool ls, rs;  // whether each is a saddle vertex (a path around a convex one is no geodesic: not detoured)
@@ -111,7 +121,7 @@ struct Workspace {
     std::vector<char> queued;
     std::vector<int> order;  // the faces in the order the queue first gave them out: relax_across_faces' sweeps
     std::vector<char> ordered;
-    std::vector<char> detoured;  // per vertex: its distance came by a path bent around a gate
+    std::vector<char> detoured;  // per vertex: its distance came by a path bent around a saddle gate
     std::vector<double> before;  // per vertex: the distances before the last update of relax_across_faces
     std::array<double, 3> from;  // the source's position
     std::vector<char> short_of_chord;  // per vertex: a value nearer than the segment from the source was refused
@@ -123,11 +133,11 @@ public:
     using UnfoldedSurface::UnfoldedSurface;
 
     template <class Q>
-    void distances(int64_t original, double* out, Workspace& w, Q& queue, double bucket, double probe,
-                   double saddle, bool convex, bool relax) const {
+    void distances(int64_t original, double* out, Workspace& w, Q& queue, const Choices& c) const {
         const int source = new_of_old_[original];
         w.from = {position_[3 * source], position_[3 * source + 1], position_[3 * source + 2]};
         w.d.assign(n_, INF);
+        const bool relax = c.relax && edge_start_.empty();  // a glued soup ends relaxed along its edges instead
         w.order.clear();
         w.detoured.assign(n_, 0);
         w.short_of_chord.assign(n_, 0);
@@ -135,7 +145,7 @@ public:
         double* d = w.d.data();
         w.faces.assign(m_, Source{0.0, 0.0, INF, INF, -1, 0});
         w.gates.resize(m_);
-        queue.reset(bucket * mean_edge_, static_cast<size_t>(m_) + 1024);
+        queue.reset(c.bucket * mean_edge_, static_cast<size_t>(m_) + 1024);
         d[source] = 0.0;
         for (int i = vf_start_[source]; i < vf_start_[source + 1]; ++i) {
             const int f = vf_[i] / 3, k = vf_[i] % 3;
@@ -154,7 +164,7 @@ public:
             if (key > w.faces[f].best) continue;  // a newer source of f is queued
             ++w.processed;
             if (relax && !w.ordered[f]) w.ordered[f] = 1, w.order.push_back(f);
-            hand_on(f, d, w, queue, probe, saddle, convex);
+            hand_on(f, d, w, queue, c);
         }
         for (int64_t v = 0; v < n_; ++v)  // reached only by paths shorter than the segment: the segment
             if (w.short_of_chord[v] && !(d[v] < INF)) d[v] = chord(w, static_cast<int>(v)) / (1.0 - CHORD_SLACK);
@@ -190,15 +200,16 @@ private:
             std::swap(w.queue, w.next);
         }
     }
-    // Gates at every saddle vertex leave no shortcut, but one source a face drops the other families of
+    // Gates at every vertex but a plane's leave no shortcut, but one source a face drops the other families of
     // paths that cross it: a vertex reached around a gate (detoured) comes out long where a family that
     // passed the gate's other side would have reached it straight, and where two families meet on a convex
     // surface a vertex is a little long too. Fast marching's triangle update (Kimmel and Sethian 1998) takes
     // the surplus back: the point S at d(a) from a and d(b) from b on the far side of the edge ab, and
     //     d(c) <- |S - c|    where the ray from S to c crosses the segment ab.
-    // First one sweep over the faces with a detoured corner, in the order the queue first gave them out, a
-    // lowered corner counting as detoured for the faces after it (it carries the family on); then one
-    // update of every face from the values the sweep left (a lowered value is not used again in it). On
+    // First one sweep over the faces with a corner detoured round a saddle gate (a path round a convex one is
+    // no geodesic), in the order the queue first gave them out, a lowered corner counting as detoured for the
+    // faces after it (it carries the family on); then one update of every face from the values the sweep left
+    // (a lowered value is not used again in it). On
     // a surface without saddles the chained update comes out short: a sphere's fields 0.25% below exact
     // where they are 0.12% above; the single update there takes them to 0.08% above.
     void relax_across_faces(double* d, Workspace& w) const {
@@ -241,11 +252,10 @@ private:
         return norm(o.cx - x, o.cy + y);
     }
 
-
     // Whether vertex v, passed by a kept source's ray, becomes a gate: a saddle (angle excess over `saddle`)
     // or, with `convex`, a convex vertex (a deficit over FLAT: not a vertex of a plane).
-    bool gate(int v, double saddle, bool convex) const {
-        return excess_[v] > saddle || (convex && excess_[v] < -FLAT);
+    bool gate(int v, const Choices& c) const {
+        return excess_[v] > c.saddle || (c.convex && excess_[v] < -FLAT);
     }
 
     // The straight distance from the source to vertex v, less a relative CHORD_SLACK: no path is shorter,
@@ -259,7 +269,7 @@ private:
     // Face f hands its source to the faces across its three edges (in each edge's frame in the face g
     // across it: A = (0, 0), B = (L, 0), C = (cx, cy) above).
     template <class Q>
-    void hand_on(int f, double* d, Workspace& w, Q& queue, double probe, double saddle, bool convex) const {
+    void hand_on(int f, double* d, Workspace& w, Q& queue, const Choices& c) const {
         const Source from = w.faces[f];
         for (int k = 0; k < 3; ++k) {
             const Across& u = across_[3 * f + k];
@@ -292,7 +302,7 @@ private:
             } else if (t.y >= -ON_EDGE * L) {
                 c_x = p_x = t.x;
             } else {
-                p = {cx + probe * (mx - cx), cy + probe * (my - cy)};
+                p = {cx + c.probe * (mx - cx), cy + c.probe * (my - cy)};
                 c_x = t.x - (cx - t.x) * t.y / (cy - t.y);
                 p_x = t.x - (p.x - t.x) * t.y / (p.y - t.y);
                 straight = true;
@@ -319,13 +329,11 @@ private:
             }
             // no path is shorter than the segment from the source: an unfolding that says so has left the
             // surface (a strip grazing a strongly convex source's fan gave 22% short values 2-7 edges from it)
-            if (!(to_c < d[u.vc])) {
-            } else if (to_c >= chord(w, u.vc)) {
+            if (to_c < d[u.vc] && to_c >= chord(w, u.vc))
                 d[u.vc] = to_c, w.detoured[u.vc] = (c_gate == 1 ? ls : c_gate == 2 && rs) || from.detoured;
-            } else {
+            else if (to_c < d[u.vc])
                 w.short_of_chord[u.vc] = 1;
-            }
-            // g's source: S past the gates, with a new gate where the ray to C passes a saddle endpoint;
+            // g's source: S past the gates, with a new gate where the ray to C passes an endpoint (gate());
             // else what the ray to the probe point passes, a gate or an endpoint
             double tie = 1.0;
             const int p_gate = blocked_by(p);
@@ -342,9 +350,9 @@ private:
                 if (!(sigma < INF)) continue;
                 gl = gr = {NAN, NAN};
                 tie = 1.0 + BENT;
-            } else if (straight && !c_gate && c_x < lo && gate(vertex(false), saddle, convex)) {
+            } else if (straight && !c_gate && c_x < lo && gate(vertex(false), c)) {
                 gl = {0.0, 0.0}, ls = excess_[vertex(false)] > FLAT;
-            } else if (straight && !c_gate && c_x > hi && gate(vertex(true), saddle, convex)) {
+            } else if (straight && !c_gate && c_x > hi && gate(vertex(true), c)) {
                 gr = {L, 0.0}, rs = excess_[vertex(true)] > FLAT;
             }
             if (!straight && !p_gate) gl = gr = {NAN, NAN};
@@ -375,17 +383,6 @@ using Twins = nb::ndarray<const int64_t, nb::ndim<1>, nb::c_contig, nb::device::
 using Excess = nb::ndarray<const double, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
 using Out = nb::ndarray<nb::numpy, double, nb::ndim<2>>;
 
-// The fields of all sources (one row each), over `threads` threads taking sources in turn; each
-// source's field depends on nothing but the source, so the result does not depend on the thread count.
-// The design choices the benchmark ablates (benchmarks/bench_field_solver.py --ablation).
-struct Choices {
-    std::string queue = "buckets";  // or "heap"
-    double bucket = 0.5;            // the buckets' width in mean edge lengths
-    double probe = 1.0;             // the probe point: 0 the far vertex, 1 the face's centroid
-    double saddle = FLAT;           // the angle excess (radians) from which a saddle vertex is a gate
-    bool convex = true;             // convex vertices are gates too
-    bool relax = true;              // the fields end with relax_across_faces
-};
 
 // The fields of all sources (one row each), over `threads` threads taking sources in turn; each
 // source's field depends on nothing but the source, so the result does not depend on the thread count.
@@ -408,9 +405,9 @@ Out solve(const VirtualSources& surface, const Sources& sources, int64_t threads
             Workspace w;
             for (size_t i; (i = next++) < k;) {
                 if (c.queue == "heap")
-                    surface.distances(src[i], out + i * n, w, w.heap, c.bucket, c.probe, c.saddle, c.convex, c.relax);
+                    surface.distances(src[i], out + i * n, w, w.heap, c);
                 else
-                    surface.distances(src[i], out + i * n, w, w.buckets, c.bucket, c.probe, c.saddle, c.convex, c.relax);
+                    surface.distances(src[i], out + i * n, w, w.buckets, c);
             }
             processed += w.processed;
         };
