@@ -8,23 +8,25 @@ from S to g's centroid crosses ab, g takes it, else g's source becomes the endpo
 passes, at distance d(e) (the path bends around e). g's third vertex c gets ``sigma + |S - c|`` where c
 itself is seen through ab, else ``sigma + |S - e| + |e - c|``; every vertex keeps its least value, and a
 face that improves (nearer at its centroid) is queued to hand its source on again. Where g keeps S
-although the ray to c passes a saddle vertex (any angle excess over rounding), that vertex becomes a gate:
-points beyond it are reached around it, never straight through the excess angle the surface lacks (GSP:
+although the ray to c passes a vertex that is not a plane's (saddle or convex), that vertex becomes a gate:
+points beyond it are reached around it, never straight through an excess angle the surface lacks (GSP:
 Trettner, Bommes, Kobbelt, "Geodesic Distance Computation via Virtual Source Propagation", CGF 40(5) 2021;
 details in ``src/virtual_source_geodesic.cpp``). One source a face leaves a vertex reached around a gate a
-little long where paths that passed the gate's other side reach it straight: one sweep of fast marching's
-triangle update over the faces around such vertices takes the surplus back. On a flat mesh the fields are
-exact.
+little long where paths that passed the gate's other side reach it straight: fast marching's triangle update
+over the faces takes most of the surplus back. No value is taken below the straight segment from the source
+(less 0.1%). On a flat mesh the fields are exact.
 
 Measured against the exact solver (benchmarks/bench_field_solver.py --zoo, docs/benchmarks.md "The shape
-zoo"): mean relative error 0.08-0.33% on every shape of :mod:`geodata.zoo` (tori, bent tubes, a coil, a
-trefoil knot, a T pipe, a saddle patch, a genus-3 plate, a filleted part, slivers, noise), where gates only
-at vertices of excess over 0.05 rad cut corners by 1.5-5.8% on the tori and tubes; 0.12-0.19% on six
-classic meshes. The fields come out a little long rather than short (signed mean -0.12 to +0.30%); the worst
-vertex of a field, beside its source, is a few percent off. Cost on one core: 0.8-2.3 ms a field at 3-10k
-vertices, linear in the mesh; memory ~0.9 kB a vertex. Several sources run on threads, with the same fields
-for any thread count. A field that puts a vertex over 5% nearer than the straight line from its source
-(which no surface path can be) is solved again by the exact solver, with a warning.
+zoo"): mean relative error 0.07-0.33% on every shape of :mod:`geodata.zoo` (tori, bent tubes, a coil, a
+trefoil knot, a T pipe, a saddle patch, a genus-3 plate, a filleted part, slivers, noise; 0.30-0.48% on the
+trefoil at 22-64k vertices), where gates only at saddles of excess over 0.05 rad cut corners by 1.5-10% on
+the tori and tubes; 0.11-0.22% on six classic meshes. The fields come out a little long rather than short
+(signed mean -0.09 to +0.30%); the worst vertex of a field, beside its source, is a few percent off. Cost on
+one core: 1.8 ms a field at 5.3k vertices, linear in the mesh from 84k on (880 ms at 1.35M); memory ~0.9 kB a
+vertex. Several sources run on threads, with the same fields for any thread count. A field that still puts a
+vertex over 5% nearer than the straight line from its source (which no surface path can be) is solved again
+by the exact solver, with a warning: a safety net, as the solver itself keeps every value within 0.1% of
+that line.
 
 Unlike the exact solver it needs no closed surface: boundaries are fine, vertices of other connected parts
 get ``inf``, faces may be oriented against each other; edges shared by three or more faces and vertices
@@ -49,8 +51,8 @@ class ApproximateGeodesicSolver:
             faces form two or more fans.
         twins: (3M,) optional: the half-edge 3 g + j glued to each half-edge 3 f + k (from corner k to
             k + 1), -1 for none, each glued back; for a surface whose edges its two vertices do not tell
-            (a point cloud's triangle soup: :mod:`gegnn.fields.cloud_vsp`). Pinched vertices are then taken (a path bends
-            there at the vertex's distance), and each field ends with d_i <= d_j + |ij| over the edges
+            (a point cloud's triangle soup: :mod:`gegnn.fields.cloud_vsp`). Pinched vertices are then taken (a
+            path bends there at the vertex's distance), and each field ends with d_i <= d_j + |ij| over the edges
             (a shortest-path queue: a fold can leave a vertex reached only the long way round).
         excess: (N,) optional: each vertex's angle excess for the gates, where its faces' corner angles
             (less 2 pi, the default) do not give it: a cloud's local triangulations overlap, a tufted cover
@@ -112,9 +114,10 @@ SHORTER = 0.05  # a field this far below a vertex's straight-line distance is so
 
 def _exact_where_impossible(fields: np.ndarray, sources: np.ndarray, vertices: np.ndarray, faces: np.ndarray):
     """Replace in place each field (a row of ``fields``) with a vertex nearer than (1 - SHORTER) times its
-    straight-line distance from the source by the exact solver's, warning how many were. Measured on the
-    field solver's zoo (docs/benchmarks.md): the worst vertex of today's fields is 0-4.8% below the segment,
-    of the fields before gates at every saddle up to 16% (tori, tubes)."""
+    straight-line distance from the source by the exact solver's, warning how many were. The solver keeps every
+    value within 0.1% of the segment since 0.3.3, so this is a net for a solver that would not: before, 1-3% of
+    the fields of the validation meshes went under it near strongly convex sources (22% short), and the
+    fields of tori and tubes up to 16%."""
     import warnings
 
     bad = []

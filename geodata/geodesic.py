@@ -27,7 +27,8 @@ import numpy as np
 from geodata.mesh import Mesh, MeshError, require_closed_manifold, vertex_components
 
 __all__ = ["BACKENDS", "APPROXIMATE", "geodesic_solver", "exact_geodesic_distances", "sample_sources",
-           "exact_geodesic_pairs", "approximation_error", "polyline_length", "edge_flip_paths", "exact_memory_estimate", "available_memory"]
+           "exact_geodesic_pairs", "approximation_error", "polyline_length", "edge_flip_paths",
+           "exact_memory_estimate", "available_memory"]
 
 BACKENDS = ("vtp", "gdist", "libigl", "vsp")
 APPROXIMATE = {"vsp": "approximate: virtual source propagation, 0.1-0.3% mean relative error from exact "
@@ -117,7 +118,7 @@ def approximation_error(mesh: Mesh, pairs: np.ndarray, distances: np.ndarray, pr
     """The mean relative error of approximate pairs (from :func:`exact_geodesic_pairs` with an approximate
     backend) against the exact solver's, over every pair of their first ``probes`` sources: what a store
     made with ``vsp`` records for each mesh (its attribute ``geodesic_error``), measured, not assumed."""
-    sources = first_seen(pairs[:, 0])[:probes]
+    sources = _first_seen(pairs[:, 0])[:probes]
     exact = geodesic_solver(mesh, "vtp")
     errors = []
     for s in sources:
@@ -127,7 +128,7 @@ def approximation_error(mesh: Mesh, pairs: np.ndarray, distances: np.ndarray, pr
     return float(np.concatenate(errors).mean())
 
 
-def first_seen(values: np.ndarray) -> np.ndarray:
+def _first_seen(values: np.ndarray) -> np.ndarray:
     """The distinct values in the order they first appear."""
     _, first = np.unique(values, return_index=True)
     return values[np.sort(first)]

@@ -88,7 +88,8 @@ def _grid_faces(rows: int, cols: int, closed_rows: bool) -> np.ndarray:
     b = i * cols + (j + 1) % cols
     c = ((i + 1) % rows) * cols + j
     d = ((i + 1) % rows) * cols + (j + 1) % cols
-    return np.concatenate([np.stack([a, c, d], -1).reshape(-1, 3), np.stack([a, d, b], -1).reshape(-1, 3)]).astype(np.int64)
+    faces = np.concatenate([np.stack([a, c, d], -1).reshape(-1, 3), np.stack([a, d, b], -1).reshape(-1, 3)])
+    return faces.astype(np.int64)
 
 
 def _remeshed(v: np.ndarray, f: np.ndarray, edge: float) -> Mesh:

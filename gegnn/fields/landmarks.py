@@ -151,8 +151,9 @@ def landmark_solver(vertices, faces, k: int, t_coef: float = T_COEF, batch: int 
 def _vsp_field(vertices, faces, t_coef: float, fields: int):
     """``fields(sources) -> (N, len(sources))`` by virtual source propagation
     (:class:`geodata.approximate_geodesic.ApproximateGeodesicSolver`, 0.1-0.3% from exact), the sources on
-    torch's threads (the embedding's network, beside them, on one fewer: :mod:`gegnn.threads`). A part it refuses (an edge of three or more faces, a pinched vertex:
-    a proxy's decimation of a 1M-vertex mesh can make a few) is solved on its
+    torch's threads (the embedding's network, beside them, on one fewer: :mod:`gegnn.threads`). A part it
+    refuses (an edge of three or more faces, a pinched vertex: a proxy's decimation of a 1M-vertex mesh can
+    make a few) is solved on its
     :func:`geodata.approximate_geodesic.manifold_copy`, each vertex at the least of its copies' distances
     and a source at a split vertex the source on every fan (each copy solved as one),
     with a warning naming the defects; the heat method's fields only where even that copy is refused."""
