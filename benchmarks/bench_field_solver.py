@@ -57,6 +57,7 @@ import torch
 from geodata._virtual_source_geodesic import VirtualSources
 from geodata.geodesic import geodesic_solver
 from geodata.mesh import Mesh
+from geodata.zoo import split_faces
 from gegnn.fields.heat import HeatDistance
 
 from machine import cpu_description  # benchmarks/ is on sys.path when a script there runs
@@ -76,23 +77,6 @@ def load(name: str) -> tuple[np.ndarray, np.ndarray]:
 
     m = trimesh.load(DEV / REAL[name], process=True, force="mesh")  # merge coincident vertices
     return np.asarray(m.vertices, dtype=np.float64), np.asarray(m.faces, dtype=np.int64)
-
-
-def split_faces(v, f, share: float, near_edge: bool, seed: int = 0):
-    """Split `share` of the faces at a random interior point (barycentric weights), or at a point within
-    2% of the face's first edge (slivers); the surface and its exact distances stay the same."""
-    rng = np.random.default_rng(seed)
-    chosen = rng.random(len(f)) < share
-    w = rng.dirichlet([1, 1, 1], chosen.sum())
-    if near_edge:
-        w[:, 2] = rng.uniform(0.002, 0.02, len(w))
-        w[:, :2] *= ((1 - w[:, 2]) / w[:, :2].sum(1))[:, None]
-    tri = f[chosen]
-    points = np.einsum("fk,fkd->fd", w, v[tri])
-    new = len(v) + np.arange(len(tri))
-    a, b, c = tri.T
-    faces = np.concatenate([f[~chosen], np.stack([a, b, new], 1), np.stack([b, c, new], 1), np.stack([c, a, new], 1)])
-    return np.concatenate([v, points]), faces
 
 
 def base_mesh(name: str):

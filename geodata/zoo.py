@@ -22,7 +22,7 @@ from typing import Callable
 
 import numpy as np
 
-__all__ = ["ZOO", "zoo_mesh", "zoo_variants", "torus", "tube", "saddle_patch"]
+__all__ = ["ZOO", "zoo_mesh", "zoo_variants", "torus", "tube", "saddle_patch", "split_faces"]
 
 Mesh = tuple[np.ndarray, np.ndarray]
 
@@ -128,13 +128,15 @@ def _plate(size: float, fillet: bool) -> Mesh:
     return _remeshed(*_solid(body), 0.08 / np.sqrt(size))
 
 
-def _split_near_edges(v: np.ndarray, f: np.ndarray, share: float, seed: int = 0) -> Mesh:
-    """``share`` of the faces split at a point within 0.2-2% of an edge: needle triangles, the same surface."""
+def split_faces(v: np.ndarray, f: np.ndarray, share: float, near_edge: bool, seed: int = 0) -> Mesh:
+    """``share`` of the faces split at a random interior point (barycentric weights), or at a point within
+    0.2-2% of the face's first edge (needle triangles); the surface and its exact distances stay the same."""
     rng = np.random.default_rng(seed)
     chosen = rng.random(len(f)) < share
     w = rng.dirichlet([1, 1, 1], int(chosen.sum()))
-    w[:, 2] = rng.uniform(0.002, 0.02, len(w))
-    w[:, :2] *= ((1 - w[:, 2]) / w[:, :2].sum(1))[:, None]
+    if near_edge:
+        w[:, 2] = rng.uniform(0.002, 0.02, len(w))
+        w[:, :2] *= ((1 - w[:, 2]) / w[:, :2].sum(1))[:, None]
     tri = f[chosen]
     new = len(v) + np.arange(len(tri))
     a, b, c = tri.T
@@ -188,7 +190,7 @@ ZOO: dict[str, Callable[[float], Mesh]] = {
     "saddle-patch": lambda size: saddle_patch(max(8, int(64 * np.sqrt(size)))),
     "genus-3-plate": lambda size: _plate(size, fillet=False),
     "filleted-part": lambda size: _plate(size, fillet=True),
-    "slivers": lambda size: _split_near_edges(*_torus(1.0, 0.3, 96, 24)(size), share=1 / 3),
+    "slivers": lambda size: split_faces(*_torus(1.0, 0.3, 96, 24)(size), share=1 / 3, near_edge=True),
     "noisy": lambda size: _noisy(*_torus(1.0, 0.3, 128, 32)(size), amount=0.3),
 }
 
