@@ -302,9 +302,19 @@ def cloud_lower_bound_table(names, ks=(64, 128, 256), n_sources=20):
                   + f" | {100 * own:.2f}% | {sec:.2f} |", flush=True)
 
 
-def zoo_table(size: float, repeat: int):
+def zoo_truth(name: str, size: float | None):
+    """A zoo shape at ``size`` (or a classic mesh, size None), 4 sources (seed 0) and their exact fields (4, N),
+    by the exact solver itself (which takes boundaries too: the saddle patch)."""
     from geodata._exact_geodesic import Surface
-    from geodata.zoo import ZOO, zoo_mesh
+    from geodata.zoo import zoo_mesh
+
+    v, f = load(name) if name in REAL else zoo_mesh(name, size)
+    sources = np.random.default_rng(0).choice(len(v), 4, replace=False).astype(np.int64)
+    return v, f, sources, Surface(v, f.astype(np.int32)).distances(sources)
+
+
+def zoo_table(size: float, repeat: int):
+    from geodata.zoo import ZOO
 
     before = dict(saddle=0.05, convex=False, relax=False)
     print(f"\nthe zoo at size {size}, the tubes finer, and six classic meshes, 4 sources each: mean / signed mean / "
@@ -313,9 +323,7 @@ def zoo_table(size: float, repeat: int):
           "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     finer = [("trefoil", 2 * size), ("trefoil", 4 * size), ("coil", 2 * size), ("u-bend", 2 * size)]
     for name, at in [*((n, size) for n in ZOO), *finer, *((n, None) for n in CLASSIC)]:
-        v, f = load(name) if name in REAL else zoo_mesh(name, at)
-        sources = np.random.default_rng(0).choice(len(v), 4, replace=False).astype(np.int64)
-        exact = Surface(v, f.astype(np.int32)).distances(sources)  # takes boundaries too (the saddle patch)
+        v, f, sources, exact = zoo_truth(name, at)
         keep = exact > 0
         solver, cells = VirtualSources(v, f), [name if at in (size, None) else f"{name} x{at / size:g}", f"{len(v):,}"]
         for choice in (before, {}):

@@ -16,10 +16,9 @@ import warnings
 import numpy as np
 import torch
 
-from bench_field_solver import CLASSIC, REAL, load
-from geodata._exact_geodesic import Surface
+from bench_field_solver import CLASSIC, zoo_truth
 from geodata.approximate_geodesic import ApproximateGeodesicSolver
-from geodata.zoo import ZOO, zoo_mesh
+from geodata.zoo import ZOO
 from gegnn import GeGnn
 from gegnn.fields.heat import HeatDistance
 from machine import cpu_description
@@ -50,9 +49,7 @@ def main():
           + " | heat method | virtual-source fields |\n|---|---:|" + "---:|" * (len(models) + 2))
     rows = []
     for name in [*ZOO, *CLASSIC]:
-        v, f = load(name) if name in REAL else zoo_mesh(name, args.size)
-        sources = np.random.default_rng(0).choice(len(v), 4, replace=False)
-        exact = Surface(v, f.astype(np.int32)).distances(sources.astype(np.int64))
+        v, f, sources, exact = zoo_truth(name, None if name in CLASSIC else args.size)
         errors = []
         for _, m in models:
             emb = m.embed(v, f)
