@@ -260,3 +260,14 @@ def test_the_approximate_backend_says_so_in_the_params_and_is_near_exact(raw, tm
     expect = np.mean(np.abs(np.concatenate([d[p[:, 0] == s] for s in first]) - truth) / truth)
     recorded = store.mesh_attrs(out, mesh_id)["geodesic_error"]
     assert 0 < recorded < 0.005 and recorded == pytest.approx(expect, rel=1e-4)
+
+
+def test_the_approximate_backends_probes_stop_where_they_would_cost_more_than_the_pairs(monkeypatch):
+    from geodata import geodesic
+    from geodata.zoo import zoo_mesh
+
+    mesh = Mesh(*zoo_mesh("torus-r0.3", 0.1))
+    pairs, distances, _ = geodesic.exact_geodesic_pairs(mesh, 2000, np.random.default_rng(0), backend="vsp")
+    assert 0 < geodesic.approximation_error(mesh, pairs, distances) < 0.01
+    monkeypatch.setattr(geodesic, "PROBED_UP_TO", mesh.n_vertices - 1)
+    assert geodesic.approximation_error(mesh, pairs, distances) is None
