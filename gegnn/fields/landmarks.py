@@ -55,6 +55,7 @@ FPS_BATCH = 16  # landmarks chosen a round, their fields in one solve (module do
 TIE = 1e-9  # farthest-point ties: relative to the largest distance
 HEAT_MIN_VERTICES = 500  # below, or for fewer fields, potpourri3d's own solver is faster (its setup is)
 HEAT_MIN_FIELDS = 32
+SPLIT_PATHS_UP_TO = 256  # pinched vertices a part's fields pass through (_SplitVertexPaths: memory 8 N B each)
 
 
 @dataclass
@@ -155,8 +156,8 @@ def _vsp_field(vertices, faces, t_coef: float, fields: int):
     refuses (an edge of three or more faces, a pinched vertex: a proxy's decimation of a 1M-vertex mesh can
     make a few) is solved on its
     :func:`geodata.approximate_geodesic.manifold_copy`, each vertex at the least of its copies' distances
-    and a source at a split vertex the source on every fan (each copy solved as one),
-    with a warning naming the defects; the heat method's fields only where even that copy is refused."""
+    and paths through a split vertex taken from fan to fan (:class:`_SplitVertexPaths`), with a warning
+    naming the defects; the heat method's fields only where even that copy is refused."""
     import warnings
 
     from geodata.approximate_geodesic import ApproximateGeodesicSolver, manifold_copy
@@ -177,20 +178,63 @@ def _vsp_field(vertices, faces, t_coef: float, fields: int):
     warnings.warn(f"landmark fields on a part of {n} vertices: {reason}: solved on a copy with {set_aside} "
                   f"face(s) set aside and {len(v) - n} vertex copies", stacklevel=2)
 
+    through = _SplitVertexPaths(solver, origin, n)
+
     def solve(sources):
-        sources = np.asarray(sources, dtype=np.int64)
-        # Every copy of a source is the source: a split vertex's other fans (often whole other parts of the
-        # copy, unreached from the first) are solved from their own copy, each column the least over them.
-        copies = n + np.flatnonzero(np.isin(origin[n:], sources))  # rare: a split source's other fans
-        copy, column = np.nonzero(origin[copies][:, None] == sources[None, :])
-        d = solver.distances(np.concatenate([sources, copies[copy]]), threads=threads.count())  # (S + copies, N')
-        out = d[:len(sources)]
-        np.minimum.at(out, column, d[len(sources):])
-        out = out.T  # (N', S): each vertex at the least of its copies' distances
-        field = out[:n].copy()
-        np.minimum.at(field, origin[n:], out[n:])
+        field = through.closed(through.fold(solver.distances(np.asarray(sources, dtype=np.int64),
+                                                             threads=threads.count())))
         return _along_edges(field, vertices, unique_edges(faces))
     return solve
+
+
+class _SplitVertexPaths:
+    r"""Paths through the split vertices of a :func:`geodata.approximate_geodesic.manifold_copy`, which the
+    copy itself cuts: each fan of a pinched vertex :math:`p` is reached only through its own copy. With
+    :math:`D(p, x)` the least copy field of :math:`p`'s copies at :math:`x` (each copy a source), closed over
+    the split vertices (Floyd-Warshall on their :math:`P \times P` block), a field :math:`d_s` becomes
+
+    .. math:: d_s(x) \leftarrow \min\big(d_s(x),\ \min_p\, d_s(p) + D(p, x)\big),
+
+    which takes every path that passes split vertices, in any order, and makes a source at a split vertex the
+    source on every fan. Costs one field a copy, once a part (a proxy's decimation makes a few), and
+    :math:`P` minima a field; memory :math:`P N` floats."""
+
+    def __init__(self, solver, origin: np.ndarray, n: int):
+        self.origin, self.n = origin, n
+        split = np.unique(origin[n:])  # input vertices with two or more fans
+        if len(split) > SPLIT_PATHS_UP_TO:
+            import warnings
+            warnings.warn(f"paths through {len(split)} pinched vertices: taken through the first "
+                          f"{SPLIT_PATHS_UP_TO} only, the others' fans reached around them or along edges",
+                          stacklevel=3)
+            split = split[:SPLIT_PATHS_UP_TO]
+        self.split = split
+        if not len(split):
+            self.through = np.zeros((0, n))
+            return
+        copies = np.concatenate([split, n + np.flatnonzero(np.isin(origin[n:], split))])
+        d = self.fold(solver.distances(copies, threads=threads.count())).T  # (copies, n)
+        through = np.full((len(self.split), n), np.inf)
+        np.minimum.at(through, np.searchsorted(self.split, origin[copies]), d)
+        hops = through[:, self.split]  # (P, P): split vertex to split vertex, one fan crossing
+        for k in range(len(self.split)):
+            hops = np.minimum(hops, hops[:, k, None] + hops[None, k, :])
+        closed = through.copy()
+        for q in range(len(self.split)):
+            closed = np.minimum(closed, hops[:, q, None] + through[None, q, :])
+        self.through = closed
+
+    def fold(self, d: np.ndarray) -> np.ndarray:
+        """Copy fields (S, N') -> (N, S), each input vertex at the least of its copies' values."""
+        out = d.T[:self.n].copy()
+        np.minimum.at(out, self.origin[self.n:], d.T[self.n:])
+        return out
+
+    def closed(self, field: np.ndarray) -> np.ndarray:
+        """``field`` (N, S) with the paths through split vertices taken (the class docstring)."""
+        for p, row in zip(self.split, self.through):
+            field = np.minimum(field, field[p][None, :] + row[:, None])
+        return field
 
 
 def _along_edges(fields: np.ndarray, vertices: np.ndarray, edges: np.ndarray) -> np.ndarray:
