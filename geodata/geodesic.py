@@ -39,7 +39,7 @@ APPROXIMATE = {"vsp": "approximate: virtual source propagation, 0.1-0.3% mean re
 # 5k-1M vertices, regular and irregular meshes, grew linearly: 9 MiB at 10k, 162 MiB at 320k, 458 MiB at
 # 1M, within 1% of MEMORY_BASE + MEMORY_SCALE N^MEMORY_POWER bytes or under it (benchmarks/
 # bench_exact_scaling.py, docs/benchmarks.md); MEMORY_MARGIN over it for meshes whose wavefront is
-# longer. (Before issue 58 every window was kept: ~40 N^1.5 bytes, 47 GiB at 1M.)
+# longer. (Keeping every window instead costs ~40 N^1.5 bytes, 47 GiB at 1M.)
 MEMORY_BASE, MEMORY_SCALE, MEMORY_POWER, MEMORY_MARGIN = 8 << 20, 500.0, 1.0, 1.25
 
 

@@ -1,7 +1,7 @@
 """What a run will cost, said in its log's first lines: the model, its size, the device, and the time per
 epoch and for the run measured from its first steps, with a hint where a preset or a GPU would be much
-faster (issue 57: 100 epochs of the paper's 256-channel network on 1,000 meshes would have taken about
-five days on a 2-core CPU, and nothing said so before the run started)."""
+faster (100 epochs of the paper's 256-channel network on 1,000 meshes take about five days on a 2-core CPU:
+a user should know before the run, not after)."""
 from __future__ import annotations
 
 import time

@@ -4,7 +4,7 @@ shipped model NAME (:data:`gegnn.model.PRETRAINED`), by default fine-tuned from 
 Nothing here is a copy of a number: the architecture is the config in the shipped file's metadata, the
 schedule the ``train_config`` that file's training run recorded (its last phase: the recipes under
 ``pipelines/landmark``, ``pipelines/biharmonic`` and ``pipelines/pretrained``). A fine-tune differs from
-it in two ways, both measured (issue 57): lr 1e-3 without warm-up took the shipped landmark model from
+it in two ways, both measured: lr 1e-3 without warm-up took the shipped landmark model from
 1.1% to 3.8% on six unseen meshes after one epoch, so a fine-tune starts at most at :data:`FINE_TUNE_LR`
 after at least :data:`FINE_TUNE_WARMUP` epochs of warm-up; and a model fine-tuned from its own shipped
 weights skips the recorded decoder warm-up, which trained a decoder new to its fields (from K = 128 to
