@@ -35,6 +35,7 @@ PART_FEWEST = 4  # the floors lowered for many parts stop here (a tetrahedron): 
 REMESH_FEWEST = 100  # a part decimated to fewer vertices is edge-collapsed only (the remesh is erratic there)
 SLIVERS = 0.05  # a mesh with more faces of quality < 0.1 than this is collapsed by pymeshlab (see decimate)
 CREASED = 1.01  # a fast collapse that adds more area than this factor creased the surface (see decimate)
+UNLATTICE = 0.01  # fast-simplification's input moved in its tangent planes by up to this share of the shortest edge
 
 
 def proxy_size(n_vertices: int, proxy) -> int | None:
@@ -197,7 +198,7 @@ def collapse(mesh: Mesh, target_faces: int) -> Mesh:
     if target_faces >= mesh.n_faces:
         return mesh
     if np.mean(triangle_quality(mesh) < 0.1) <= SLIVERS:
-        v, f = fast_simplification.simplify(mesh.vertices, mesh.faces.astype(np.int32), target_count=target_faces)
+        v, f = fast_simplification.simplify(unlatticed(mesh), mesh.faces.astype(np.int32), target_count=target_faces)
         fast = compact(np.asarray(v, dtype=np.float64), np.asarray(f, dtype=np.int64))
         if face_areas(fast.vertices, fast.faces).sum() <= CREASED * face_areas(mesh.vertices, mesh.faces).sum():
             mesh = fast  # else it creased the surface (a collapse does not add area): pymeshlab's, below
@@ -205,6 +206,28 @@ def collapse(mesh: Mesh, target_faces: int) -> Mesh:
         mesh = meshlab_filter(mesh, "meshing_decimation_quadric_edge_collapse", targetfacenum=target_faces,
                               preservetopology=True, qualitythr=0.3, autoclean=True)
     return mesh
+
+
+def unlatticed(mesh: Mesh, share: float = UNLATTICE, seed: int = 0) -> np.ndarray:
+    r"""The vertices, each moved in its tangent plane (normal to its area-weighted normal) by a seeded random
+    offset of up to ``share`` of its shortest edge: the same surface to :math:`O(\text{share}^2)` of an edge
+    where it curves, exactly where it is flat. fast-simplification refuses a collapse that leaves two edges
+    of a triangle within 2.6 degrees of each other, and on a regular lattice in a plane (a mesh subdivided by
+    midpoints: every face of the original a plane of 4^k) nearly every collapse does that exactly: a
+    1.29M-vertex spot subdivided 4 times stalled at 377,646 of the 60,000 vertices asked, in 34 s, after its
+    100 rounds; moved by 1%, 60,002 in 4.6 s."""
+    v, f = mesh.vertices, mesh.faces
+    edge = v[np.roll(f, -1, axis=1)] - v[f]  # (M, 3, 3): the edge from each corner to the next
+    a, b = edge[:, 0].T, -edge[:, 2].T
+    area_normal = (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+    normal = np.stack([np.bincount(f.ravel(), np.repeat(c, 3), minlength=len(v)) for c in area_normal], 1)
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), np.finfo(float).tiny)
+    length = np.sqrt(np.einsum("mkd,mkd->mk", edge, edge))  # (M, 3): the edge leaving each corner
+    shortest = np.full(len(v), np.inf)
+    np.minimum.at(shortest, f.ravel(), np.minimum(length, np.roll(length, 1, axis=1)).ravel())
+    shortest[~np.isfinite(shortest)] = 0.0  # a vertex on no face stays
+    step = np.random.default_rng(seed).uniform(-1, 1, v.shape) * (share * shortest)[:, None]
+    return v + step - (step * normal).sum(axis=1, keepdims=True) * normal
 
 
 def at_most(mesh: Mesh, n_vertices: int) -> Mesh:
