@@ -80,9 +80,12 @@ def create_store(out: str | Path, params: dict) -> zarr.Group:
     from geodata import __version__
     root = _open_or_create_root(out, {"geodata_format": FORMAT, "params": params, "writer": __version__})
     _check_format(out, root)
-    if root.attrs.get("params") != params:
-        diff = {k: v for k, v in root.attrs.get("params", {}).items() if params.get(k) != v}
-        raise StoreError(f"{out} was made with {diff}; use another OUT for other parameters")
+    made = root.attrs.get("params", {})
+    if made != params:
+        diff = {k: v for k, v in made.items() if params.get(k) != v}
+        unset = sorted(set(params) - set(made))  # parameters this geodata has and the store's writer did not
+        since = f" and without {', '.join(unset)} (made by an older geodata)" if unset else ""
+        raise StoreError(f"{out} was made with {diff}{since}; use another OUT for other parameters")
     for name in ("meshes", "failed", "sources"):
         (Path(out) / name).mkdir(exist_ok=True)
     return root

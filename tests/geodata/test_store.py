@@ -27,12 +27,14 @@ def test_simultaneous_shards_all_open_one_store(tmp_path):
 
 def test_other_parameters_are_refused(tmp_path):
     """A store keeps one setting: another is refused, naming the stored values that differ (and only
-    those); the shared parents exist before any worker writes; a foreign zarr group is not taken over."""
+    those) and the parameters an older store lacks; the shared parents exist before any worker writes; a foreign zarr group is not taken over."""
     out = tmp_path / "s.zarr"
     store.create_store(out, {"pairs": 1, "seed": 0})
     assert (out / "meshes").is_dir() and (out / "failed").is_dir() and (out / "sources").is_dir()
     with pytest.raises(store.StoreError, match=r"was made with \{'pairs': 1\}; use another OUT"):
         store.create_store(out, {"pairs": 2, "seed": 0})
+    with pytest.raises(store.StoreError, match=r"was made with \{\} and without backend \(made by an older geodata\)"):
+        store.create_store(out, {"pairs": 1, "seed": 0, "backend": "vtp"})
     other = tmp_path / "other.zarr"
     zarr.open_group(other, mode="w", attributes={"made_by": "someone else"})
     with pytest.raises(store.StoreError, match=f"{other} is not a geodata store"):
