@@ -60,7 +60,7 @@ class ApproximateGeodesicSolver:
         saddle: the angle excess (radians) from which a saddle vertex is a gate (default: any, above
             rounding).
         convex: convex vertices are gates too (the default: every vertex but a plane's is one). A cloud's
-            soup, whose excess comes from overlapping fans, is solved with saddle 0.05 and no convex gates.
+            soup, whose excess comes from overlapping fans, is solved without convex gates.
 
     Raises:
         ValueError: naming what is wrong with the mesh (shapes, non-finite coordinates, indices out of

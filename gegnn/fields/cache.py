@@ -63,11 +63,12 @@ FIELD_VERSIONS = {
     "vsp": 2,         # ... by virtual sources (geodata.approximate_geodesic); 2 (0.3.3): a gate at every
                       # saddle vertex, fast-marching updates after the propagation, no value below the chord
     "cloud-heat": 2,  # a point cloud's by the heat method (gegnn.fields.cloud_heat); 2 (after 0.3.3): as cloud-vsp 3
-    "cloud-vsp": 3,   # ... by virtual sources on its local triangles (gegnn.fields.cloud_vsp); 2 (0.3.3): a
+    "cloud-vsp": 4,   # ... by virtual sources on its local triangles (gegnn.fields.cloud_vsp); 2 (0.3.3): a
                       # point they leave apart continued along the graph, where it was inf; no value below the chord;
                       # 3 (after 0.3.3): with a scan's normals, the neighbours on a point's own sheet and a projection
                       # fitted to its side (gegnn.fields.cloud_sides; a cloud without normals, as a cache holds it,
-                      # keeps its values)
+                      # keeps its values); 4: gates at every saddle point, the local triangulations of points
+                      # moved 3% of a spacing (a regular grid's were ambiguous)
     "spectral": 1,    # spectral codes (gegnn.fields.spectral)
 }
 
