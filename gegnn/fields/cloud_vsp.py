@@ -29,7 +29,9 @@ over the edges (a shortest-path queue from every point; it lowers 8-17% of the v
 median, and moves the fields' mean error by under 0.01 points).
 
 The solver's gates (every saddle point, as a mesh's, but no convex ones: a point's convex excess comes from
-overlapping fans) take each point's excess from its own local triangles, :math:`\sum_{(i, a, b)} \angle a i b - 2\pi`
+overlapping fans; gates only from 0.05 rad, up to 0.3.3, let tubes' saddle regions be cut across: points-v3
+on the zoo's trefoil cloud 3.6%, 0.45% at every saddle, the 19 validation clouds 2.18% / 2.17% with
+normals) take each point's excess from its own local triangles, :math:`\sum_{(i, a, b)} \angle a i b - 2\pi`
 over the triangles point i emitted: the soup holds a point's corners of every triangulation it is in (and a
 cover each twice).
 
@@ -39,11 +41,6 @@ the fields take the bridge at full length: too short there, as the heat method's
 from __future__ import annotations
 
 import numpy as np
-
-# radians: the angle excess from which a cloud point is a gate. At 0.05 (up to 0.3.3) tubes' saddle regions
-# were cut across: points-v3 on the zoo's trefoil cloud 3.6% (triangulations unlatticed), 0.45% at every saddle;
-# the 19 validation clouds the same (2.18% / 2.17% with normals).
-CLOUD_SADDLE = 1e-6
 
 from .heat import tufted_cover
 
@@ -121,7 +118,7 @@ class CloudVirtualSources:
         faces, twins = (paired_mesh if gluing == "pairs" else cover_mesh)(points, agreed_soup(triangles))
         self.n_points = len(points)
         self._solver = ApproximateGeodesicSolver(points, faces, twins=twins, excess=own_excess(points, triangles),
-                                                 saddle=CLOUD_SADDLE, convex=False)
+                                                 convex=False)
 
     def distances(self, sources, threads: int = 1) -> np.ndarray:
         """Distances (N, len(sources)) from each source point to every point (``inf`` on other parts)."""

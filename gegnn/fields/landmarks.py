@@ -214,13 +214,13 @@ class _SplitVertexPaths:
             return
         copies = np.concatenate([split, n + np.flatnonzero(np.isin(origin[n:], split))])
         d = self.fold(solver.distances(copies, threads=threads.count())).T  # (copies, n)
-        through = np.full((len(self.split), n), np.inf)
-        np.minimum.at(through, np.searchsorted(self.split, origin[copies]), d)
-        hops = through[:, self.split]  # (P, P): split vertex to split vertex, one fan crossing
-        for k in range(len(self.split)):
+        through = np.full((len(split), n), np.inf)
+        np.minimum.at(through, np.searchsorted(split, origin[copies]), d)
+        hops = through[:, split]  # (P, P): split vertex to split vertex, one fan crossing
+        for k in range(len(split)):
             hops = np.minimum(hops, hops[:, k, None] + hops[None, k, :])
         closed = through.copy()
-        for q in range(len(self.split)):
+        for q in range(len(split)):
             closed = np.minimum(closed, hops[:, q, None] + through[None, q, :])
         self.through = closed
 

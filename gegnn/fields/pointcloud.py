@@ -306,19 +306,15 @@ def surface_neighbors(points: np.ndarray, k: int = HEAT_K, cone_deg: float = CON
     return out
 
 
-def _unlatticed(points: np.ndarray, share: float | None = None, seed: int = 0) -> np.ndarray:
-    """The points, each moved by a seeded random offset of up to ``share`` (``UNLATTICE``) of the distance to
-    its nearest, for the local triangulations only (their lengths stay the points'): on a regular grid four
-    neighbours lie on one circle, the local Delaunay triangulations of two points pick the two diagonals
-    differently, and the glued triangles zigzag (virtual-source fields on a 128 x 32 grid torus 4.95% off,
-    0.58% moved by 3%)."""
+def _unlatticed(points: np.ndarray) -> np.ndarray:
+    """The points, each moved by a seeded random offset of up to ``UNLATTICE`` of the distance to its nearest,
+    for the local triangulations only (their lengths stay the points'): on a regular grid four neighbours lie
+    on one circle, the local Delaunay triangulations of two points pick the two diagonals differently, and the
+    glued triangles zigzag (virtual-source fields on a 128 x 32 grid torus 4.95% off, 0.58% moved by 3%)."""
     from scipy.spatial import cKDTree
 
-    share = UNLATTICE if share is None else share
-    if not share:
-        return points
     nearest = cKDTree(points).query(points, 2, workers=threads.count())[0][:, 1]
-    return points + np.random.default_rng(seed).uniform(-1, 1, points.shape) * (share * nearest)[:, None]
+    return points + np.random.default_rng(0).uniform(-1, 1, points.shape) * (UNLATTICE * nearest)[:, None]
 
 
 def _cloud_field(points: np.ndarray, t_coef: float, normals: np.ndarray | None = None, solver: str = "heat"):

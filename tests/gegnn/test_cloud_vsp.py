@@ -125,7 +125,7 @@ def test_points_the_triangles_leave_apart_continue_along_the_graph():
 
 
 @pytest.mark.parametrize("name", ["torus-r0.3", "trefoil"])
-def test_a_regular_grid_and_a_knot_tube_as_clouds_get_fields_near_exact(monkeypatch, name):
+def test_a_regular_grid_and_a_knot_tube_as_clouds_get_fields_near_exact(name):
     """The vertex clouds of a torus on a regular 128 x 32 grid and of a trefoil tube (geodata.zoo): on the grid
     four neighbours lie on one circle and the local triangulations zigzag, and gates only from 0.05 rad let the
     knot's saddle regions be cut across: 4.83% and 4.41% off before (points unmoved, gates from 0.05 rad), 0.32%
