@@ -12,6 +12,7 @@ is the review of what the pages now say by hand.
 """
 from __future__ import annotations
 
+import functools
 import importlib.util
 import re
 import sys
@@ -36,15 +37,16 @@ def _load(path: Path, name: str):
     return module
 
 
-def _module(name: str):
-    return _load(ROOT / "tests" / f"{name}.py", name)
+@functools.cache
+def _claims() -> list[tuple[str, str, str]]:
+    """tests/test_docs_figures.py's CLAIMS: (key, page, pattern) of the figures it ties to docs/results.json."""
+    return _load(ROOT / "tests" / "test_docs_figures.py", "test_docs_figures").CLAIMS
 
 
 def tied_spans(page: str, text: str) -> list[tuple[int, int]]:
     """Where ``text`` (``page`` as written) states a figure that tests/test_docs_figures.py checks against
     docs/results.json."""
-    claims = _module("test_docs_figures").CLAIMS
-    return [m.span(1) for _, where, pattern in claims if where == page for m in re.finditer(pattern, text)]
+    return [m.span(1) for _, where, pattern in _claims() if where == page for m in re.finditer(pattern, text)]
 
 
 def page_figures(page: str, text: str, tied: list[tuple[int, int]] = ()) -> list[tuple[int, str, str]]:
