@@ -142,8 +142,9 @@ def main() -> None:
                     continue
                 seconds, field_s, peak, pred, _ = embed_in_child(v, f, n0, sources)
                 heat_s, heat_d = heat(v, f, sources, n0)
-                table.append(f"| {name} | {kinds[kind]} | {len(v):,} | {seconds:.2f} s | {peak:.2f} GB | {field_s:.2f} s | "
-                             f"{100 * mre(pred, exact):.2f}% | {heat_s:.2f} s | {100 * mre(heat_d, exact):.2f}% |")
+                table.append(f"| {name} | {kinds[kind]} | {len(v):,} | {seconds:.2f} s | {peak:.2f} GB | "
+                             f"{field_s:.2f} s | {100 * mre(pred, exact):.2f}% | {heat_s:.2f} s | "
+                             f"{100 * mre(heat_d, exact):.2f}% |")
                 print(table[-1], flush=True)
     if args.write:
         write_table("docs/queries.md", table)

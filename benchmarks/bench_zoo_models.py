@@ -48,8 +48,8 @@ def main():
     models = [model(m) for m in args.models]
     print(f"CPU: {cpu_description()}")
     print("mean relative error of fields from 4 sources to every vertex, against exact")
-    table = ["| shape | vertices | " + " | ".join(label for label, _ in models) + " | heat method | virtual-source fields |",
-             "|---|---:|" + "---:|" * (len(models) + 2)]
+    table = ["| shape | vertices | " + " | ".join(label for label, _ in models)
+             + " | heat method | virtual-source fields |", "|---|---:|" + "---:|" * (len(models) + 2)]
     print("\n".join(table))
     rows = []
     for name in [*ZOO, *CLASSIC]:

@@ -245,9 +245,9 @@ def test_a_thin_tube_is_collapsed_without_creases():
 
 def test_a_mesh_subdivided_by_midpoints_is_collapsed_fast_without_the_fallback(monkeypatch):
     """An icosphere(1) subdivided 5 times (41k vertices: every face of the original a flat lattice of 1,024):
-    fast-simplification all but stops on such lattices: it stopped at 6,921 of the 1,002 vertices asked (the 1.29M spot at 377,646 of 60,000, in 34 s); its input
-    moved 1% of an edge in the tangent planes (``unlatticed``) reaches them, so pymeshlab's collapse is not
-    needed (it raises here)."""
+    fast-simplification all but stops on such lattices: it stopped at 6,921 of the 1,002 vertices asked (the
+    1.29M spot at 377,646 of 60,000, in 34 s); its input moved 1% of an edge in the tangent planes
+    (``unlatticed``) reaches them, so pymeshlab's collapse is not needed (it raises here)."""
     import gegnn.queries.proxy as proxy
     import geodata.stages.repair as repair
     from geodata.mesh import face_areas
