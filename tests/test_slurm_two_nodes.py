@@ -34,9 +34,11 @@ def _env(tmp_path):
     behind a geodata and a torchrun that first write down the node they run on (and torchrun its cores)."""
     bin_dir = tmp_path / "bin"
     bin_dir.mkdir()
-    # A prepare task of the shard named in the file "hold" waits there (a shard at work when its node fails).
+    # A prepare task of the shard named in the file "hold" waits there (a shard at work when its node fails) and
+    # never goes on to the real prepare: cancelled, SLURM may kill the sleep before the shell, which would
+    # otherwise run the shard to the end (seen once: the shard's meshes all done when the test expected none).
     hold = (f'[ "$1" = prepare ] && [[ " $* " != *" --check "* && -e "{tmp_path}/hold" && " $* " == *" --shard '
-            f'$(cat "{tmp_path}/hold") "* ]] && sleep 3600\n')
+            f'$(cat "{tmp_path}/hold") "* ]] && {{ sleep 3600; exit 143; }}\n')
     for name, extra in (("geodata", ""), ("torchrun", ' $(python3 -c "import os; print(len(os.sched_getaffinity(0)))")')):
         real = shutil.which(name, path=str(Path(sys.executable).parent))
         (bin_dir / name).write_text(f'#!/usr/bin/env bash\necho "$(hostname) ${{SLURM_JOB_ID:-}}{extra} $*" >> '
