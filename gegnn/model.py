@@ -166,7 +166,8 @@ class GeGnn(nn.Module):
                                   np.asarray(normals)[subset], requested)
                 corners, weights = cloud_weights(points, subset)
                 return emb.blended(corners, weights, part=emb.part[corners[:, 0]],
-                                   ambiguous=emb.ambiguous[corners].any(axis=1), scatter=emb.scatter)
+                                   ambiguous=emb.ambiguous[corners].any(axis=1), walls=emb.walls[corners].any(axis=1),
+                                   scatter=emb.scatter)
             vertices, faces = _validated(vertices, faces)
             proxy = proxy_of(vertices, faces, target)  # each vertex's closest point on its part's proxy
             return self._embed(proxy.mesh.vertices, proxy.mesh.faces, precision, None, requested).at_points(
@@ -179,13 +180,12 @@ class GeGnn(nn.Module):
         if self.config.points:
             if faces is not None:
                 raise ValueError("a point-cloud model takes points only (faces=None)")
-            hierarchy, fields, scale, expand, part, ambiguous, scatter = self.cloud_inputs(vertices, normals, device)
+            hierarchy, fields, scale, expand, part, walls = self.cloud_inputs(vertices, normals, device)
         else:
             if faces is None:
                 raise ValueError("this model embeds meshes: give faces, or use a point-cloud model "
                                  "(trained with gegnn train --neighbors)")
-            (hierarchy, fields, scale), expand, part = self.inputs(vertices, faces, device), None, None
-            ambiguous = scatter = None
+            (hierarchy, fields, scale), expand, part, walls = self.inputs(vertices, faces, device), None, None, None
         was_training = self.training
         self.eval()
 
@@ -206,8 +206,8 @@ class GeGnn(nn.Module):
         self.train(was_training)
         if expand is not None:
             codes = codes[torch.as_tensor(expand, device=device)]
-        return Embedding(codes, self.distance, scale, requested, vertices=vertices, faces=faces, part=part,
-                         ambiguous=ambiguous, scatter=scatter)
+        sides = {} if walls is None else dict(ambiguous=walls.ambiguous, walls=walls.walls, scatter=walls.scatter)
+        return Embedding(codes, self.distance, scale, requested, vertices=vertices, faces=faces, part=part, **sides)
 
     def inputs(self, vertices: np.ndarray, faces: np.ndarray, device) -> tuple[Callable, Callable, float]:
         """What the network reads for one mesh in any units, as two functions that :meth:`embed` runs side
@@ -235,7 +235,9 @@ class GeGnn(nn.Module):
         normalized (their normals estimated there), one giving their landmark fields (the heat method's
         row-by-row set-up is made here, on all of torch's threads; the rest on one, by the function), the
         scale back to the input's units; the distinct point of every input point (N,), the part of every input
-        point (N,), whether it is ambiguous (N,) and the cloud's scatter (:func:`gegnn.fields.pointcloud.cloud_graph`)."""
+        point (N,), and what :func:`gegnn.fields.cloud_sides.close_walls` saw of close sheets, per input point
+        (:func:`gegnn.fields.pointcloud.cloud_graph`)."""
+        from .fields.cloud_sides import Walls
         from .fields.pointcloud import cloud_graph, cloud_landmark_solver, collinear
 
         points = np.asarray(points, dtype=np.float64)
@@ -264,7 +266,8 @@ class GeGnn(nn.Module):
         def fields():
             return None if spec is None else torch.as_tensor(solver(spec.size).distances, device=device)
         expand = expand.reshape(-1)
-        return hierarchy, fields, scale, expand, g.part[expand], g.ambiguous[expand], g.scatter
+        walls = Walls(g.walls.ambiguous[expand], g.walls.walls[expand], g.walls.scatter)
+        return hierarchy, fields, scale, expand, g.part[expand], walls
 
     def finetune(self, vertices: np.ndarray, faces: np.ndarray, **options):
         """Finetune in place on one mesh from exact distances of a few of its vertices; returns the

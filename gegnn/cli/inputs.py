@@ -123,13 +123,14 @@ def _load_cloud(cloud_path, sources, err: bool = False):
 
 WARN_SHARE = 0.005  # ambiguous points from which the line saying so is a warning (fewer: a note)
 SCATTER_NOTE = 0.2  # spacings: from this scatter on, a cloud without normals is told that close sheets may go unseen
+WALLS_NOTE = 0.05   # close walls that the normals tell apart, from which a cloud is told where they can still fail
 
 
 def _embed_cloud(model, cloud, keep, cloud_path, precision):
     """The model's embedding of a cloud file's kept points (with the file's normals, if it has them); a cloud
     the model cannot take fails naming the file. Points where two sheets of the surface come closer than
     the spacing and the sides cannot be told apart are named in a warning (stderr), as is a scatter that
-    could hide such sheets."""
+    could hide such sheets, and a cloud with many close sheets that its normals tell apart in a note."""
     with _click_errors(cloud_path):
         emb = model.embed(cloud.points[keep], normals=None if cloud.normals is None else cloud.normals[keep],
                           precision=precision)
@@ -142,7 +143,13 @@ def _embed_cloud(model, cloud, keep, cloud_path, precision):
         click.echo(f"{name}: {kind}: {flagged} of {len(keep)} points lie where two sheets of the surface come "
                    f"closer than the points' spacing and the sides cannot be told apart ({why}): distances from "
                    "them may run through the wall, short by the way round it (Embedding.ambiguous)", err=True)
-    elif cloud.normals is None and emb.scatter is not None and emb.scatter > SCATTER_NOTE:
+    apart = 0 if emb.walls is None else int((emb.walls & ~emb.ambiguous).sum())
+    if cloud.normals is not None and apart >= WALLS_NOTE * len(keep):
+        click.echo(f"{name}: note: {apart} of {len(keep)} points lie where two sheets of the surface come closer "
+                   "than the points' spacing and the file's normals tell the sides apart; where such a wall also "
+                   "ends or creases within a spacing (a rim, a slit) distances can still cross it, short by the way "
+                   "round (Embedding.walls)", err=True)
+    if not flagged and cloud.normals is None and emb.scatter is not None and emb.scatter > SCATTER_NOTE:
         click.echo(f"{name}: note: the points scatter {emb.scatter:.2f} spacings about a smooth surface (median): "
                    "two sheets of it closer than a few spacings would not be told apart, nor seen; normals (nx ny "
                    "nz) would tell them apart", err=True)

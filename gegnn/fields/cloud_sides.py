@@ -30,11 +30,13 @@ offset in spacings, says how much there is.
 """
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from .. import threads
 
-__all__ = ["facing_neighbors", "facing_ranks", "two_sheets", "close_walls", "LAYER_K", "LAYER_RATIO"]
+__all__ = ["facing_neighbors", "facing_ranks", "two_sheets", "close_walls", "Walls", "LAYER_K", "LAYER_RATIO"]
 
 BLOCK = 4096          # rows ranked at once (bounded temporaries)
 LAYER_K = 20          # neighbours of each point's two-sheet test
@@ -156,17 +158,26 @@ def _split(points: np.ndarray, nbrs: np.ndarray, dist: np.ndarray) -> dict:
             "rms": np.sqrt((offset ** 2).mean(axis=1)) / spacing}
 
 
-def close_walls(points: np.ndarray, normals: np.ndarray | None = None) -> tuple[np.ndarray, float]:
-    """Which points (N,) lie where two sheets of surface come closer than the neighbourhood is wide and the
-    sides cannot be told apart (module docstring): without ``normals`` wherever two sheets are seen; with
-    the cloud's own oriented normals, where those of the other sheet do not face away. And the cloud's
-    scatter: the median RMS offset of a neighbourhood from its fitted quadric, in spacings (noise, or a
-    second sheet everywhere)."""
+class Walls(NamedTuple):
+    """What :func:`close_walls` sees in a cloud: ``walls`` (N,), the points where two sheets of surface come
+    closer than the neighbourhood is wide; ``ambiguous`` (N,), those of them whose sides the normals do not
+    tell apart (all of them without normals); ``scatter``, the median RMS offset of a neighbourhood from its
+    fitted quadric, in spacings (noise, or a second sheet everywhere)."""
+    ambiguous: np.ndarray
+    walls: np.ndarray
+    scatter: float
+
+
+def close_walls(points: np.ndarray, normals: np.ndarray | None = None) -> Walls:
+    """Which points lie where two sheets of surface come closer than the neighbourhood is wide, and which of
+    them cannot be told apart (module docstring): without ``normals`` all of them; with the cloud's own
+    oriented normals, those where the normals of the other sheet do not face away. And the cloud's scatter."""
     test = two_sheets(points)
     nbrs, other = test["nbrs"], test["other"]
     seen = (((test["ratio"] > LAYER_RATIO) & (test["gap"] > LAYER_GAP))
             | ((test["three"] > LAYER_THREE) & (test["gap3"] > 2 * LAYER_GAP)))
+    walls = seen[nbrs].mean(axis=1) >= AMBIGUOUS_SHARE
     if normals is not None:  # told apart where (nearly) all of the other group face away
         facing = np.einsum("nkd,nd->nk", normals[nbrs], normals) > 0
         seen &= (other & facing).sum(axis=1) > FACING_SHARE * other.sum(axis=1)
-    return seen[nbrs].mean(axis=1) >= AMBIGUOUS_SHARE, float(np.median(test["rms"]))
+    return Walls(seen[nbrs].mean(axis=1) >= AMBIGUOUS_SHARE, walls, float(np.median(test["rms"])))

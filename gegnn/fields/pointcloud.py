@@ -45,7 +45,7 @@ import numpy as np
 from geodata.mesh import label_groups
 
 from .. import threads
-from .cloud_sides import close_walls, facing_neighbors
+from .cloud_sides import Walls, close_walls, facing_neighbors
 from .landmarks import LandmarkFields, _along_edges, graph_farthest_points, landmark_columns
 
 __all__ = ["CloudGraph", "cloud_graph", "mls_project", "surface_neighbors", "knn_edges", "graph_parts",
@@ -67,15 +67,16 @@ MIN_PART = 31       # parts of fewer points get no fields (distance 0): potpourr
 class CloudGraph:
     """A point cloud's graph: the projected ``points`` (N, 3) it is made of (:func:`mls_project`),
     undirected ``edges`` (E, 2), the part of every point (``part``, (N,), labels 0, 1, ... of the graph's
-    connected components) and unit ``normals`` (N, 3): the given ones, or estimated and oriented
+    connected components), unit ``normals`` (N, 3): the given ones, or estimated and oriented
     (:func:`pca_normals` of each point's k ``neighbors``, :func:`orient_normals`) when first read, which
-    only the network does (:meth:`gegnn.GeGnn.embed` reads them beside the landmark fields)."""
+    only the network does (:meth:`gegnn.GeGnn.embed` reads them beside the landmark fields); and what
+    :func:`gegnn.fields.cloud_sides.close_walls` saw of close sheets (``walls``)."""
 
     def __init__(self, points: np.ndarray, edges: np.ndarray, part: np.ndarray, neighbors: np.ndarray,
-                 normals: np.ndarray | None = None, ambiguous: np.ndarray | None = None, scatter: float = 0.0):
+                 normals: np.ndarray | None = None, walls: Walls | None = None):
         self.points, self.edges, self.part, self.neighbors = points, edges, part, neighbors
-        self.ambiguous = np.zeros(len(points), dtype=bool) if ambiguous is None else ambiguous
-        self.scatter = scatter
+        none = np.zeros(len(points), dtype=bool)
+        self.walls = Walls(none, none, 0.0) if walls is None else walls
         if normals is not None:
             self.normals = np.asarray(normals, dtype=np.float64)
 
@@ -198,12 +199,12 @@ def _tree_signs(order: np.ndarray, parent: np.ndarray, normals: np.ndarray) -> n
 def cloud_graph(points: np.ndarray, k: int = KNN, normals: np.ndarray | None = None) -> CloudGraph:
     """The graph of a point cloud of distinct points, made of the points projected by :func:`mls_project`
     (see the module); ``normals``: given ones (used as they are, unit length) instead of estimated. Its
-    ``ambiguous`` points and ``scatter`` come from the points as given (the projection would fit two close
-    sheets as one): :func:`gegnn.fields.cloud_sides.close_walls`."""
-    ambiguous, scatter = close_walls(points, normals)
+    ``walls`` come from the points as given (the projection would fit two close sheets as one):
+    :func:`gegnn.fields.cloud_sides.close_walls`."""
+    walls = close_walls(points, normals)
     points = mls_project(points, normals=normals)
     edges, nbrs = knn_edges(points, k, normals)
-    return CloudGraph(points, edges, graph_parts(len(points), edges), nbrs, normals, ambiguous, scatter)
+    return CloudGraph(points, edges, graph_parts(len(points), edges), nbrs, normals, walls)
 
 
 def graph_parts(n: int, edges: np.ndarray) -> np.ndarray:

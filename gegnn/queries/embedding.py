@@ -47,16 +47,21 @@ class Embedding:
             the points' spacing and the sides cannot be told apart (no normals, or normals that do not face
             away there): distances from such a point may run through the wall, short by the way round it
             (:func:`gegnn.fields.cloud_sides.close_walls`); None for a mesh.
+        walls: for a point cloud, whether each point (N,) lies where two sheets of surface come closer than
+            its neighbourhood is wide, whether or not the sides are told apart (``ambiguous`` are those they
+            are not): with normals that tell them apart the fields keep to each side, but where such a wall
+            also ends or creases within a spacing they can still cross it; None for a mesh.
         scatter: for a point cloud, how far its points lie off a smooth surface, in spacings (median): noise
             as large as the gap between two sheets hides them from ``ambiguous``; None for a mesh.
     """
 
     def __init__(self, features: Tensor, decoder, scale: float = 1.0, precision: str = "fp32",
                  chunk: int | None = None, vertices: np.ndarray | None = None, faces: np.ndarray | None = None,
-                 part: np.ndarray | None = None, ambiguous: np.ndarray | None = None, scatter: float | None = None):
+                 part: np.ndarray | None = None, ambiguous: np.ndarray | None = None,
+                 walls: np.ndarray | None = None, scatter: float | None = None):
         self.features = features.detach()
         self.part = part
-        self.ambiguous, self.scatter = ambiguous, scatter
+        self.ambiguous, self.walls, self.scatter = ambiguous, walls, scatter
         self.vertices = None if vertices is None else np.asarray(vertices, dtype=np.float64)
         self.faces = None if faces is None else np.asarray(faces, dtype=np.int64)
         self._topology = None
@@ -145,11 +150,11 @@ class Embedding:
 
     def blended(self, corners, weights, vertices: np.ndarray | None = None, faces: np.ndarray | None = None,
                 part: np.ndarray | None = None, chunk: int = 1 << 16, ambiguous: np.ndarray | None = None,
-                scatter: float | None = None) -> "Embedding":
+                walls: np.ndarray | None = None, scatter: float | None = None) -> "Embedding":
         """An embedding whose row p is the blend of rows ``corners[p]`` (P, 3) with ``weights[p]`` (P, 3; >= 0,
         summing to 1) by the decoder's ``point_codes``: points inside faces (:meth:`at_points`), or the points of
         a dense cloud between the points of its embedded subset. ``vertices``, ``faces``, ``part``,
-        ``ambiguous``, ``scatter``: as for any Embedding."""
+        ``ambiguous``, ``walls``, ``scatter``: as for any Embedding."""
         device = self.features.device
         corners = torch.as_tensor(np.asarray(corners, dtype=np.int64), device=device)
         weights = torch.as_tensor(np.asarray(weights, dtype=np.float32), device=device)
@@ -157,7 +162,7 @@ class Embedding:
             codes = torch.cat([self._blend(corners[s:s + chunk], weights[s:s + chunk])
                                for s in range(0, len(corners), chunk)]) if len(corners) else self.features[:0]
         return Embedding(codes, self.decoder, self.scale, self.precision, vertices=vertices, faces=faces, part=part,
-                         ambiguous=ambiguous, scatter=scatter)
+                         ambiguous=ambiguous, walls=walls, scatter=scatter)
 
     def locate(self, points):
         """The closest surface point of each xyz point (P, 3) (in the mesh's units), as
