@@ -3,7 +3,7 @@ against exact geodesics on the surface the points were taken from.
 
     python benchmarks/bench_close_walls.py [--shapes slab bowl fold zfold] [--ratios 0.25 0.5 1 2 4]
         [--points 5000] [--sources 16] [--noise 0.005] [--store data/val.zarr --meshes lion teapot ...]
-        [--csv out.csv]
+        [--csv out.csv] [--write]
 
 Shapes (:mod:`geodata.walls`): a slab (a disc with a thickness), a bowl (a hemispherical shell with a
 rounded lip), a sheet folded in two (a hairpin, open) and one folded twice (three layers); the sides
@@ -25,7 +25,8 @@ one) and ``model ok`` its MRE over the pairs of unflagged points.
 
 ``--store`` adds the validation store's meshes named by ``--meshes`` (id prefixes, "" for all; their stored
 exact pairs, ``--pairs`` of them), their vertices as clouds, clean and noisy, without and with the mesh's
-vertex normals. One torch thread.
+vertex normals. One torch thread. ``--write`` (with the default shapes and ratios) writes the summary table
+of docs/pointclouds.md and its figures into docs/results.json (``walls.*``).
 """
 from __future__ import annotations
 
@@ -42,6 +43,7 @@ import torch  # noqa: E402
 from machine import cpu_description  # noqa: E402  (benchmarks/ is on sys.path when a script there runs)
 from gegnn import GeGnn  # noqa: E402
 from geodata.walls import WALLS, wall_mesh  # noqa: E402
+from results import record, write_table  # noqa: E402
 
 EPS = 1e-3
 WARN_SHARE = 0.005  # gegnn query's warning: from this share of the points flagged (gegnn.cli.inputs)
@@ -87,15 +89,16 @@ def model_fields(model, points: np.ndarray, sources: np.ndarray, normals) -> np.
 
 
 def model_answers(model, points, sources, normals):
-    """The model's distances (S, N) from ``sources``, its ambiguous flags (N,) (all False where it has none)
-    and the embed's seconds."""
+    """The model's distances (S, N) from ``sources``, its ambiguous flags (N,) (all False where it has none),
+    the share of the points it sees on close walls, and the embed's seconds."""
     t = time.perf_counter()
     emb = model.embed(points, normals=normals)
     seconds = time.perf_counter() - t
     d = np.stack([emb.field(int(s)) for s in sources])
     d[emb.part[sources][:, None] != emb.part[None, :]] = np.inf  # across parts: no answer (gegnn query: NaN)
     flags = getattr(emb, "ambiguous", None)
-    return d, np.zeros(len(points), bool) if flags is None else np.asarray(flags, bool), seconds
+    walls = float(np.mean(emb.walls)) if getattr(emb, "walls", None) is not None else float("nan")
+    return d, np.zeros(len(points), bool) if flags is None else np.asarray(flags, bool), walls, seconds
 
 
 def evaluate(model, points, normals, sources, truth, with_heat: bool) -> dict:
@@ -106,11 +109,12 @@ def evaluate(model, points, normals, sources, truth, with_heat: bool) -> dict:
     if with_heat:
         row["heat"] = mre(heat_fields(points, sources)[mask], truth[mask])
     row["fields"] = mre(model_fields(model, points, sources, normals)[mask], truth[mask])
-    pred, flags, seconds = model_answers(model, points, sources, normals)
+    pred, flags, walls, seconds = model_answers(model, points, sources, normals)
     row["model"] = mre(pred[mask], truth[mask])
     row["apart"] = float(np.mean(~np.isfinite(pred[mask])))
     ok = mask & ~flags[None, :] & ~flags[sources][:, None]
     row["flagged"] = float(flags.mean())
+    row["walls"] = walls
     row["model_ok"] = mre(pred[ok], truth[ok]) if ok.any() else float("nan")
     row["embed_s"] = seconds
     return row
@@ -165,12 +169,60 @@ def store_rows(model, args):
             yield dict(cloud=name, ratio=None, noisy=noisy, normals=given,
                        points=len(points), heat=float("nan"), fields=float("nan"), model=mre(d, exact),
                        apart=float(np.mean(~np.isfinite(d))),
-                       flagged=float(flags.mean()), model_ok=mre(d[ok], exact[ok]) if ok.any() else float("nan"),
-                       embed_s=float("nan"))
+                       flagged=float(flags.mean()), walls=float(np.mean(emb.walls)),
+                       model_ok=mre(d[ok], exact[ok]) if ok.any() else float("nan"), embed_s=float("nan"))
 
 
 def pct(x) -> str:
     return "-" if x is None or x != x else f"{100 * x:.2f}%"
+
+
+def share(x: float) -> str:
+    """A percentage as the page states it: two decimals under 1%, one under 10%, none above."""
+    x = 100 * x
+    return f"{x:.2f}" if x < 1 else f"{x:.1f}" if x < 10 else f"{x:.0f}"
+
+
+def span(values) -> str:
+    """The range of ``values`` as the page states it, ``lo-hi%`` (one figure where they round alike)."""
+    lo, hi = share(min(values)), share(max(values))
+    return f"{lo}%" if lo == hi else f"{lo}-{hi}%"
+
+
+PARTED = ("slab", "bowl", "fold")  # the shapes whose two sides face away: the normals part them
+
+
+def lead_table(rows: list[dict], ratios) -> list[str]:
+    """docs/pointclouds.md's summary: by walls / spacing, the heat method's mean over all shapes (clean), and
+    over the slab, bowl and fold the model's range without normals, the share flagged, with normals, and
+    noisy with normals; the sheet folded twice with normals."""
+    lines = ["| walls / spacing | heat method | points-v3, no normals | flagged | points-v3, normals "
+             "| folded twice, normals | noisy, normals |", "|---:|---:|---:|---:|---:|---:|---:|"]
+    for ratio in ratios:
+        def pick(shapes, noisy, given):
+            return [r for r in rows if r["ratio"] == ratio and r["cloud"] in shapes and r["noisy"] == noisy
+                    and r["normals"] == given]
+        plain, given = pick(PARTED, False, False), pick(PARTED, False, True)
+        lines.append(f"| {ratio:g} | {share(np.mean([r['heat'] for r in pick(WALLS, False, False)]))}% | "
+                     f"{span([r['model'] for r in plain])} | {span([r['flagged'] for r in plain])} | "
+                     f"{span([r['model'] for r in given])} | {span([r['model'] for r in pick(('zfold',), False, True)])} | "
+                     f"{span([r['model'] for r in pick(PARTED, True, True)])} |")
+    return lines
+
+
+def write_results(rows: list[dict], ratios) -> None:
+    """The summary table into docs/pointclouds.md and its headline figures into docs/results.json."""
+    write_table("docs/pointclouds.md", lead_table(rows, ratios))
+    shapes = [r for r in rows if r["ratio"] is not None and r["cloud"] in PARTED and not r["noisy"]]
+    source = "docs/pointclouds.md#geodesics-on-point-clouds"
+    record("walls.normals", span([r["model"] for r in shapes if r["normals"]]),
+           "GeGnn.pretrained(\"points\") with the surface's normals on a slab, a bowl and a sheet folded in two, "
+           f"{min(ratios):g}-{max(ratios):g} spacings thick, ~5,000 clean points: the range of the MRE", source)
+    thin = [r for r in shapes if not r["normals"] and r["ratio"] <= 1]
+    record("walls.no-normals", span([r["model"] for r in thin]),
+           "the same without normals, the walls 1 spacing thick or less: the range of the MRE", source)
+    record("walls.flagged", span([r["flagged"] for r in thin]),
+           "the same clouds: the share of their points flagged ambiguous", source)
 
 
 def main():
@@ -186,6 +238,8 @@ def main():
     ap.add_argument("--meshes", nargs="+", default=["lion", "teapot", "penguin", "dragon-fd96"])
     ap.add_argument("--pairs", type=int, default=20000)
     ap.add_argument("--csv")
+    ap.add_argument("--write", action="store_true", help="write docs/pointclouds.md's summary table and its "
+                                                         "figures in docs/results.json")
     args = ap.parse_args()
     torch.set_num_threads(1)
     model = GeGnn.from_checkpoint(args.model) if args.model.endswith(".safetensors") else GeGnn.pretrained(args.model)
@@ -220,6 +274,8 @@ def main():
                       f"{pct(np.mean([r['model'] for r in plain]))} | {pct(np.mean([r['flagged'] for r in plain]))} | "
                       f"{pct(max(unwarned)) if unwarned else 'none'} | {pct(np.mean([r['model'] for r in given]))} | "
                       f"{pct(max(r['model'] for r in given))} |")
+    if args.write:
+        write_results(rows, args.ratios)
     if args.csv:
         with open(args.csv, "w", newline="") as out:
             w = csv.DictWriter(out, fieldnames=list(rows[0]))
