@@ -205,7 +205,8 @@ def lead_table(rows: list[dict], ratios) -> list[str]:
         plain, given = pick(PARTED, False, False), pick(PARTED, False, True)
         lines.append(f"| {ratio:g} | {share(np.mean([r['heat'] for r in pick(WALLS, False, False)]))}% | "
                      f"{span([r['model'] for r in plain])} | {span([r['flagged'] for r in plain])} | "
-                     f"{span([r['model'] for r in given])} | {span([r['model'] for r in pick(('zfold',), False, True)])} | "
+                     f"{span([r['model'] for r in given])} | "
+                     f"{span([r['model'] for r in pick(('zfold',), False, True)])} | "
                      f"{span([r['model'] for r in pick(PARTED, True, True)])} |")
     return lines
 
