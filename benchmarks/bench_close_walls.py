@@ -97,8 +97,8 @@ def model_answers(model, points, sources, normals):
     d = np.stack([emb.field(int(s)) for s in sources])
     d[emb.part[sources][:, None] != emb.part[None, :]] = np.inf  # across parts: no answer (gegnn query: NaN)
     flags = getattr(emb, "ambiguous", None)
-    walls = float(np.mean(emb.walls)) if getattr(emb, "walls", None) is not None else float("nan")
-    return d, np.zeros(len(points), bool) if flags is None else np.asarray(flags, bool), walls, seconds
+    flags = np.zeros(len(points), bool) if flags is None else np.asarray(flags, bool)
+    return d, flags, float(np.mean(emb.walls)), seconds
 
 
 def evaluate(model, points, normals, sources, truth, with_heat: bool) -> dict:

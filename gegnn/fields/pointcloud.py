@@ -73,10 +73,8 @@ class CloudGraph:
     :func:`gegnn.fields.cloud_sides.close_walls` saw of close sheets (``walls``)."""
 
     def __init__(self, points: np.ndarray, edges: np.ndarray, part: np.ndarray, neighbors: np.ndarray,
-                 normals: np.ndarray | None = None, walls: Walls | None = None):
-        self.points, self.edges, self.part, self.neighbors = points, edges, part, neighbors
-        none = np.zeros(len(points), dtype=bool)
-        self.walls = Walls(none, none, 0.0) if walls is None else walls
+                 walls: Walls, normals: np.ndarray | None = None):
+        self.points, self.edges, self.part, self.neighbors, self.walls = points, edges, part, neighbors, walls
         if normals is not None:
             self.normals = np.asarray(normals, dtype=np.float64)
 
@@ -204,7 +202,7 @@ def cloud_graph(points: np.ndarray, k: int = KNN, normals: np.ndarray | None = N
     walls = close_walls(points, normals)
     points = mls_project(points, normals=normals)
     edges, nbrs = knn_edges(points, k, normals)
-    return CloudGraph(points, edges, graph_parts(len(points), edges), nbrs, normals, walls)
+    return CloudGraph(points, edges, graph_parts(len(points), edges), nbrs, walls, normals)
 
 
 def graph_parts(n: int, edges: np.ndarray) -> np.ndarray:
