@@ -88,15 +88,19 @@ def part_budget(size: np.ndarray, area: np.ndarray, target_vertices: int) -> np.
             lo, hi = (mid, hi) if np.minimum(floor, mid).sum() <= FLOORS * target else (lo, mid - 1)
         floor = np.minimum(floor, max(lo, PART_FEWEST))
 
-    def budget(scale: float) -> np.ndarray:
-        return np.minimum(size, np.maximum(floor, np.floor(scale * area).astype(np.int64)))
+    def budget(scale: float) -> np.ndarray:  # clipped before the cast: a part of ~0 area makes scales huge
+        return np.minimum(size, np.maximum(floor, np.floor(np.minimum(scale * area, size)).astype(np.int64)))
 
-    positive = area > 0
-    lo, hi = 0.0, float((size[positive] / area[positive]).max()) if positive.any() else 0.0
-    for _ in range(100):  # the largest scale whose budgets fit (their sum grows with the scale)
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if budget(mid).sum() <= target else (lo, mid)
-    out = budget(lo)
+    grows = (area > 0) & (floor < size)  # the parts whose budget grows with the scale, until it is their size
+    out = floor
+    if grows.any():  # the largest scale whose budgets fit (their sum grows with the scale), by bisection of its
+        # logarithm: the scales span from where no part gets more than its floor to where all have their size,
+        # which a part of ~1e-18 area puts 1e18 times higher
+        lo, hi = 1.0 / float(area[grows].sum()), float((size[grows] / area[grows]).max())
+        for _ in range(200):
+            mid = float(np.sqrt(lo * hi))
+            lo, hi = (mid, hi) if budget(mid).sum() <= target else (lo, mid)
+        out = budget(lo)
     cut = out < full
     if cut.any():
         enough = int(np.ceil(full.sum() / FLOORS))

@@ -229,6 +229,26 @@ def test_part_budgets_never_exceed_the_proxy():
         part_budget(np.full(15_000, 3), np.ones(15_000), 20_000)
 
 
+def test_a_stray_degenerate_part_leaves_the_body_its_budget():
+    """A collapsed triangle beside the body (three vertices within 2e-9, area ~1e-18, as CAD soups and scans
+    carry) made the budgets' scale overflow the cast and settle on the floors: the body's proxy had 500
+    vertices of 20,000, silently. The body now gets the rest of the budget, and the proxy of a small sphere
+    with such a part is about as large as the sphere's own (its budget 997 instead of 1,000)."""
+    import trimesh
+    from gegnn.queries.proxy import proxy_of, part_budget
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no cast warning, no "parts get fewer"
+        assert part_budget(np.array([327_682, 3]), np.array([12.57, 1e-18]), 20_000).tolist() == [19_997, 3]
+        sphere = trimesh.creation.icosphere(4)  # 2,562 vertices
+        n = len(sphere.vertices)
+        v = np.vstack([sphere.vertices, [[2, 2, 2], [2, 2, 2 + 1e-9], [2 + 2e-9, 2, 2]]])
+        f = np.vstack([sphere.faces, [[n, n + 1, n + 2]]])
+        with_part = proxy_of(v, f, 1000).mesh
+    alone = proxy_of(sphere.vertices, sphere.faces, 1000).mesh
+    assert abs(with_part.n_vertices - alone.n_vertices) < 0.05 * alone.n_vertices  # 500 before
+
+
 def test_a_thin_tube_is_collapsed_without_creases():
     """fast-simplification collapses a fine U-bent tube (239k vertices) to 60k with 19% more area and a third of
     its faces slivers, its geodesics 13% longer than the tube's (the proxy's model answered 16% off); the
