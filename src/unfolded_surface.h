@@ -249,6 +249,47 @@ protected:
         excess_.resize(n_);
         for (int64_t v = 0; v < n_; ++v) excess_[v] = angle_sum[v] - 2.0 * M_PI;
         mean_edge_ = m_ > 0 && total > 0.0 ? total / m_ : 1.0;
+        excess_of_coincident(V);
+    }
+
+    // Vertices at one place (joined by edges of zero length: a point split onto its own endpoint, a face
+    // collapsed in a scan) are one point of the surface, and their corner angles in the faces that join them
+    // are arbitrary (the direction of a zero-length edge is none): each gets the excess of the point, the
+    // sum of their angle sums less pi for each face with a zero-length edge (its angles at the point; the
+    // third corner's is 0) less 2 pi. Without it, a plane with one such split had two false gates (a field
+    // 0.8-1.4% off where the plane's is exact).
+    void excess_of_coincident(const double* V) {
+        std::vector<int> root(n_);
+        for (int64_t v = 0; v < n_; ++v) root[v] = static_cast<int>(v);
+        auto find = [&](int v) {
+            while (root[v] != v) v = root[v] = root[root[v]];
+            return v;
+        };
+        std::vector<int> collapsed(m_, -1);  // per face: a vertex of its zero-length edge (-1: none)
+        bool any = false;
+        for (int64_t f = 0; f < m_; ++f)
+            for (int k = 0; k < 3; ++k) {
+                const int a = F_[3 * f + k], b = F_[3 * f + (k + 1) % 3];
+                const double* p = &V[3 * a];
+                const double* q = &V[3 * b];
+                if (a == b || p[0] != q[0] || p[1] != q[1] || p[2] != q[2]) continue;
+                collapsed[f] = a, any = true;
+                const int ra = find(a), rb = find(b);
+                if (ra != rb) root[std::max(ra, rb)] = std::min(ra, rb);
+            }
+        if (!any) return;
+        std::vector<double> sum(n_, 0.0);
+        std::vector<int> members(n_, 0);
+        for (int64_t v = 0; v < n_; ++v) {
+            const int r = find(static_cast<int>(v));
+            sum[r] += excess_[v] + 2.0 * M_PI, ++members[r];
+        }
+        for (int64_t f = 0; f < m_; ++f)
+            if (collapsed[f] >= 0) sum[find(collapsed[f])] -= M_PI;
+        for (int64_t v = 0; v < n_; ++v) {
+            const int r = find(static_cast<int>(v));
+            if (members[r] > 1) excess_[v] = sum[r] - 2.0 * M_PI;
+        }
     }
 
     void build_unfoldings() {

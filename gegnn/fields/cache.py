@@ -60,8 +60,9 @@ LANDMARK_DRAWS = 4  # landmark choices per training mesh (augmentation; each com
 # change (its solver, the value of a point it leaves unreached, the landmark choice); at 1 the name carries none.
 FIELD_VERSIONS = {
     "heat": 1,        # a mesh's landmark fields by the heat method (gegnn.fields.landmarks)
-    "vsp": 2,         # ... by virtual sources (geodata.approximate_geodesic); 2 (0.3.3): a gate at every
-                      # saddle vertex, fast-marching updates after the propagation, no value below the chord
+    "vsp": 3,         # ... by virtual sources (geodata.approximate_geodesic); 2 (0.3.3): a gate at every
+                      # saddle vertex, fast-marching updates after the propagation, no value below the chord;
+                      # 3 (after 0.3.3): vertices at one place (an edge of zero length) take the point's excess
     "cloud-heat": 2,  # a point cloud's by the heat method (gegnn.fields.cloud_heat); 2 (after 0.3.3): as cloud-vsp 3
     "cloud-vsp": 4,   # ... by virtual sources on its local triangles (gegnn.fields.cloud_vsp); 2 (0.3.3): a
                       # point they leave apart continued along the graph, where it was inf; no value below the chord;

@@ -44,7 +44,7 @@ def test_specs_name_their_fields_and_read_a_models_config():
     # fields by virtual source propagation: their own folder, so heat and vsp fields never mix, a mesh's and
     # a cloud's (gegnn.fields.cloud_vsp) alike
     assert FieldSpec.of(small_config(landmarks=64, landmark_fields="vsp")) == FieldSpec("landmark", 64, 0, "vsp")
-    assert FieldSpec("landmark", 64, 0, "vsp").name == "k64-rounds16-vsp-v2"
+    assert FieldSpec("landmark", 64, 0, "vsp").name == "k64-rounds16-vsp-v3"
     assert FieldSpec.of(small_config(landmarks=64, points=8, landmark_fields="vsp")) == FieldSpec("landmark", 64, 8, "vsp")
     assert FieldSpec("landmark", 64, 8, "vsp").name == "k64-cloud8-surface2-vsp-v4"
     with pytest.raises(ValueError, match="landmark_fields must be one of heat, vsp"):
