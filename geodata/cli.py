@@ -145,8 +145,8 @@ def main():
               help="Geodesic code: exact, all equal to 1e-9: vtp (this package's solver, the fastest), "
                    "gdist (tvb-gdist) or libigl (the reference); or approximate: vsp (virtual source propagation, "
                    "0.1-0.3% from exact on average, 6-8x faster than vtp at 5k vertices and linear in the mesh: for "
-                   "meshes too large for an exact solve of every source; the store's params say so). The store "
-                   "records it and refuses a run with another.")
+                   "meshes too large for an exact solve of every source; each mesh records its measured error). The "
+                   "store records it and refuses a run with another.")
 @TIMEOUT_OPTION
 @click.option("--points", "n_points", type=click.IntRange(2), metavar="N",
               help="Then add N surface points per mesh with exact distances between them, --pairs of them "

@@ -11,9 +11,10 @@ Three backends compute the same exact distances:
 and one approximates them, for meshes too large for an exact solve of every source:
 
 - ``vsp``: virtual source propagation (:mod:`geodata.approximate_geodesic`), 0.1-0.3% from exact on
-  average over the shape zoo and classic meshes (a few percent at a field's worst vertex), an order of
-  magnitude faster than vtp at 5k vertices and linear in the mesh. A store made with it says so in its
-  parameters (``geodesic_error``: ``APPROXIMATE``).
+  average over the shape zoo and classic meshes (a few percent at a field's worst vertex), 6-8x faster than
+  vtp at 5k vertices and linear in the mesh. A store made with it names it in its parameters
+  (``geodesic_backend``), and each of its meshes records its error measured against vtp
+  (:func:`approximation_error`).
 
 Kirsanov's code segfaults on non-manifold input, so every call first checks the closed-manifold
 invariants; the same guard keeps the contract of the ``vtp`` solver, which is only tested on such meshes.
@@ -31,8 +32,7 @@ __all__ = ["BACKENDS", "APPROXIMATE", "geodesic_solver", "exact_geodesic_distanc
            "exact_memory_estimate", "available_memory"]
 
 BACKENDS = ("vtp", "gdist", "libigl", "vsp")
-APPROXIMATE = {"vsp": "approximate: virtual source propagation, 0.1-0.3% mean relative error from exact "
-                      "(0.08-0.33% a shape over the shape zoo and classic meshes; docs/benchmarks.md)"}
+APPROXIMATE = ("vsp",)  # the approximate backends (their errors: the module docstring, docs/benchmarks.md)
 # The vtp solver keeps the mesh's half-edge tables (~430 bytes a vertex) and only the wavefront of a source
 # (the windows waiting to cross a face, in chunks that the next ones reuse: ~50 MiB at 1M vertices).
 # The peak resident memory of building the solver and one solve, over what the process held before,

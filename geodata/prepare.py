@@ -46,13 +46,10 @@ class PrepareConfig:
     max_memory: int | None = None  # bytes one mesh's process may use (None: no limit)
 
     def store_params(self) -> dict:
-        """The parameters that decide the data (a store holds one setting of them); an approximate geodesic
-        backend adds ``geodesic_error``, what its distances are (exact backends add nothing: their stores'
-        parameters are as before)."""
-        params = {k: v for k, v in asdict(self).items() if k not in ("timeout", "max_memory")}
-        if self.geodesic_backend in APPROXIMATE:
-            params["geodesic_error"] = APPROXIMATE[self.geodesic_backend]
-        return params
+        """The parameters that decide the data (a store holds one setting of them), values only: an approximate
+        store is told by its ``geodesic_backend`` (one of ``APPROXIMATE``), and each of its meshes records its
+        measured error (the attribute ``geodesic_error``)."""
+        return {k: v for k, v in asdict(self).items() if k not in ("timeout", "max_memory")}
 
 
 @dataclass(frozen=True)

@@ -73,22 +73,44 @@ def _check_format(out: str, root: zarr.Group) -> None:
 def create_store(out: str | Path, params: dict) -> zarr.Group:
     """Open OUT for writing, creating the root group and the meshes/, failed/ and sources/ folders if missing.
 
-    A store holds data made with one setting of `params`; a run asking for other values is refused
-    rather than mixing two datasets under one name.
+    A store holds data made with one setting of `params` (values, never prose); a run asking for other values
+    is refused rather than mixing two datasets under one name, the error saying what differs as the command
+    line says it.
     """
-    out = str(out)
+    out, params = str(out), _identity(params)
     from geodata import __version__
     root = _open_or_create_root(out, {"geodata_format": FORMAT, "params": params, "writer": __version__})
     _check_format(out, root)
-    made = root.attrs.get("params", {})
+    made = _identity(root.attrs.get("params", {}))
     if made != params:
-        diff = {k: v for k, v in made.items() if params.get(k) != v}
-        unset = sorted(set(params) - set(made))  # parameters this geodata has and the store's writer did not
-        since = f" and without {', '.join(unset)} (made by an older geodata)" if unset else ""
-        raise StoreError(f"{out} was made with {diff}{since}; use another OUT for other parameters")
+        raise StoreError(f"{out} {'; '.join(_differences(made, params))}: use another OUT for other parameters")
     for name in ("meshes", "failed", "sources"):
         (Path(out) / name).mkdir(exist_ok=True)
     return root
+
+
+# Words that geodata 0.3.2-0.3.3 kept among an approximate store's parameters (what its distances are); they
+# describe a store and do not identify it, so they are read past.
+DESCRIPTIONS = ("geodesic_error",)
+
+
+def _identity(params: dict) -> dict:
+    return {k: v for k, v in params.items() if k not in DESCRIPTIONS}
+
+
+def _differences(made: dict, asked: dict) -> list[str]:
+    """What differs between a store's parameters and a run's, each as its option (``--geodesic-backend``)."""
+    out = []
+    for key in sorted(set(made) | set(asked)):
+        option = "--" + key.replace("_", "-")
+        if key in made and key in asked:
+            if made[key] != asked[key]:
+                out.append(f"was made with {option} {made[key]}, this run asks for {asked[key]}")
+        elif key in asked:
+            out.append(f"was made by an older geodata, which did not record {option} (this run: {asked[key]})")
+        elif key in made:
+            out.append(f"was made with {option} {made[key]}, which this geodata does not know (a newer one's store)")
+    return out
 
 
 def _open_or_create_root(out: str, attrs: dict, attempts: int = 50) -> zarr.Group:

@@ -26,15 +26,29 @@ def test_simultaneous_shards_all_open_one_store(tmp_path):
 
 
 def test_other_parameters_are_refused(tmp_path):
-    """A store keeps one setting: another is refused, naming the stored values that differ (and only
-    those) and the parameters an older store lacks; the shared parents exist before any worker writes; a foreign zarr group is not taken over."""
+    """A store keeps one setting: another is refused, naming each value that differs (and only those) as its
+    option, and the parameters an older store lacks or a newer one has; words an older geodata kept among
+    them (0.3.2's and 0.3.3's ``geodesic_error`` sentence) do not identify a store; the shared parents exist
+    before any worker writes; a foreign zarr group is not taken over."""
     out = tmp_path / "s.zarr"
     store.create_store(out, {"pairs": 1, "seed": 0})
     assert (out / "meshes").is_dir() and (out / "failed").is_dir() and (out / "sources").is_dir()
-    with pytest.raises(store.StoreError, match=r"was made with \{'pairs': 1\}; use another OUT"):
+    with pytest.raises(store.StoreError, match=r"was made with --pairs 1, this run asks for 2: use another OUT"):
         store.create_store(out, {"pairs": 2, "seed": 0})
-    with pytest.raises(store.StoreError, match=r"was made with \{\} and without backend \(made by an older geodata\)"):
-        store.create_store(out, {"pairs": 1, "seed": 0, "backend": "vtp"})
+    with pytest.raises(store.StoreError, match=r"was made by an older geodata, which did not record "
+                                               r"--geodesic-backend \(this run: vtp\)"):
+        store.create_store(out, {"pairs": 1, "seed": 0, "geodesic_backend": "vtp"})
+    with pytest.raises(store.StoreError, match=r"was made with --seed 0, which this geodata does not know"):
+        store.create_store(out, {"pairs": 1})
+    old = tmp_path / "old-vsp.zarr"  # as geodata 0.3.2 made it: a sentence among the values
+    store.create_store(old, {"pairs": 1, "geodesic_backend": "vsp"})
+    root = zarr.open_group(old, mode="r+")
+    root.attrs["params"] = {**root.attrs["params"], "geodesic_error": "approximate: virtual source propagation"}
+    store.create_store(old, {"pairs": 1, "geodesic_backend": "vsp"})  # resumed
+    with pytest.raises(store.StoreError) as refused:
+        store.create_store(old, {"pairs": 1, "geodesic_backend": "vtp"})
+    assert str(refused.value) == (f"{old} was made with --geodesic-backend vsp, this run asks for vtp: use another "
+                                  f"OUT for other parameters")
     other = tmp_path / "other.zarr"
     zarr.open_group(other, mode="w", attributes={"made_by": "someone else"})
     with pytest.raises(store.StoreError, match=f"{other} is not a geodata store"):
