@@ -23,8 +23,8 @@ quadric leaves, split about 2.5-4 spreads apart and three groups of them hold up
 validation clouds, clean and noisy, 0-0.3% of the points are flagged but for the thin shells, lion 68% and
 teapot 49% clean: ``benchmarks/bench_close_walls.py --store``.)
 A point is *ambiguous* where at least ``AMBIGUOUS_SHARE`` (three in ten) of it and its nearest are such
-points whose other sheet the normals do not tell apart: no normals given, or those of the other group not
-facing away on average (mean :math:`n_p \cdot n_q` above -0.5). Noise as large as the gap between two
+points whose other sheet the normals do not tell apart: no normals given, or over ``FACING_SHARE`` (a quarter)
+of the other group facing the point's side (:math:`n_p \cdot n_q > 0`), where a wall's other side faces away. Noise as large as the gap between two
 sheets hides them (their offsets then spread as one sheet's do): a cloud's ``scatter``, the median RMS
 offset in spacings, says how much there is.
 """
@@ -104,18 +104,26 @@ def two_sheets(points: np.ndarray, k: int = LAYER_K) -> dict:
     gap over their pooled spread; ``gap`` (N,) and ``rms`` (N,) the gap and the RMS offset from the fitted
     quadric, over the point's spacing (the mean distance of its 6 nearest); ``three`` (N,) the share of the
     offsets' variance between the best three groups, ``gap3`` (N,) the gap between the outer two over the
-    spacing. Fewer than k + 1 points: all."""
+    spacing. Fewer than k + 1 points: all. A neighbourhood of fewer than 6 points has no two groups of three
+    (``ratio`` and ``gap`` 0, no ``other``), of fewer than 9 no three (``three`` and ``gap3`` 0): nothing is
+    seen in a cloud that small."""
     from scipy.spatial import cKDTree
 
-    points = np.ascontiguousarray(points, dtype=np.float64)
-    k = min(k, len(points) - 1)
-    dist, nbrs = cKDTree(points).query(points, k + 1, workers=threads.count())
-    out = {key: [] for key in ("other", "ratio", "gap", "three", "gap3", "rms")}
+    points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+    k = max(0, min(k, len(points) - 1))
+    if not len(points):
+        return {"nbrs": np.zeros((0, 1), dtype=np.int64),
+                **{key: np.zeros((0, 1), dtype=bool) if key == "other" else np.zeros(0) for key in _KEYS}}
+    dist, nbrs = cKDTree(points).query(points, list(range(1, k + 2)), workers=threads.count())  # (N, k + 1)
+    out = {key: [] for key in _KEYS}
     for s in range(0, len(points), BLOCK):
         part = _split(points, nbrs[s:s + BLOCK], dist[s:s + BLOCK])
         for key in out:
             out[key].append(part[key])
     return {"nbrs": nbrs.astype(np.int64), **{key: np.concatenate(v) for key, v in out.items()}}
+
+
+_KEYS = ("other", "ratio", "gap", "three", "gap3", "rms")
 
 
 def _split(points: np.ndarray, nbrs: np.ndarray, dist: np.ndarray) -> dict:
@@ -138,24 +146,28 @@ def _split(points: np.ndarray, nbrs: np.ndarray, dist: np.ndarray) -> dict:
         total = c1[:, j] - c1[:, i]
         return total / count, (c2[:, j] - c2[:, i]) - total ** 2 / count
 
-    cut = np.arange(3, m - 2)                            # two groups: [0, cut), [cut, m), three or more each
-    (lo, lo_ss), (hi, hi_ss) = group(np.zeros_like(cut), cut), group(cut, np.full_like(cut, m))
-    within = (lo_ss + hi_ss) / m
-    best = ((hi - lo) ** 2 / np.maximum(within, 1e-300)).argmax(axis=1)
     rows = np.arange(n)
-    gap = (hi - lo)[rows, best]
-    spread = np.sqrt(np.maximum(within[rows, best], 0.0))
-    upper = offset > 0.5 * (ordered[rows, cut[best] - 1] + ordered[rows, cut[best]])[:, None]
-    a3, b3 = np.meshgrid(np.arange(m + 1), np.arange(m + 1), indexing="ij")  # three groups: [0, a), [a, b), [b, m)
-    ok = (a3 >= 3) & (b3 - a3 >= 3) & (m - b3 >= 3)
-    a3, b3 = a3[ok], b3[ok]
-    (lo3, ss1), (_, ss2), (hi3, ss3) = group(np.zeros_like(a3), a3), group(a3, b3), group(b3, np.full_like(b3, m))
-    best3 = (ss1 + ss2 + ss3).argmin(axis=1)
-    total_ss = np.maximum(group(np.zeros(1, dtype=int), np.full(1, m))[1][:, 0], 1e-300)
-    spacing = np.maximum(dist[:, 1:7].mean(axis=1), 1e-300)
-    return {"other": upper != upper[:, :1], "ratio": gap / np.maximum(spread, 1e-300), "gap": gap / spacing,
-            "three": 1 - (ss1 + ss2 + ss3)[rows, best3] / total_ss, "gap3": (hi3 - lo3)[rows, best3] / spacing,
-            "rms": np.sqrt((offset ** 2).mean(axis=1)) / spacing}
+    spacing = np.maximum(dist[:, 1:7].mean(axis=1), 1e-300) if m > 1 else np.ones(n)
+    out = {"other": np.zeros((n, m), dtype=bool), "ratio": np.zeros(n), "gap": np.zeros(n), "three": np.zeros(n),
+           "gap3": np.zeros(n), "rms": np.sqrt((offset ** 2).mean(axis=1)) / spacing}
+    if m >= 6:
+        cut = np.arange(3, m - 2)                        # two groups: [0, cut), [cut, m), three or more each
+        (lo, lo_ss), (hi, hi_ss) = group(np.zeros_like(cut), cut), group(cut, np.full_like(cut, m))
+        within = (lo_ss + hi_ss) / m
+        best = ((hi - lo) ** 2 / np.maximum(within, 1e-300)).argmax(axis=1)
+        gap = (hi - lo)[rows, best]
+        spread = np.sqrt(np.maximum(within[rows, best], 0.0))
+        upper = offset > 0.5 * (ordered[rows, cut[best] - 1] + ordered[rows, cut[best]])[:, None]
+        out.update(other=upper != upper[:, :1], ratio=gap / np.maximum(spread, 1e-300), gap=gap / spacing)
+    if m >= 9:
+        a3, b3 = np.meshgrid(np.arange(m + 1), np.arange(m + 1), indexing="ij")  # three: [0, a), [a, b), [b, m)
+        ok = (a3 >= 3) & (b3 - a3 >= 3) & (m - b3 >= 3)
+        a3, b3 = a3[ok], b3[ok]
+        (lo3, ss1), (_, ss2), (hi3, ss3) = group(np.zeros_like(a3), a3), group(a3, b3), group(b3, np.full_like(b3, m))
+        best3 = (ss1 + ss2 + ss3).argmin(axis=1)
+        total_ss = np.maximum(group(np.zeros(1, dtype=int), np.full(1, m))[1][:, 0], 1e-300)
+        out.update(three=1 - (ss1 + ss2 + ss3)[rows, best3] / total_ss, gap3=(hi3 - lo3)[rows, best3] / spacing)
+    return out
 
 
 class Walls(NamedTuple):
@@ -180,4 +192,5 @@ def close_walls(points: np.ndarray, normals: np.ndarray | None = None) -> Walls:
     if normals is not None:  # told apart where (nearly) all of the other group face away
         facing = np.einsum("nkd,nd->nk", normals[nbrs], normals) > 0
         seen &= (other & facing).sum(axis=1) > FACING_SHARE * other.sum(axis=1)
-    return Walls(seen[nbrs].mean(axis=1) >= AMBIGUOUS_SHARE, walls, float(np.median(test["rms"])))
+    scatter = float(np.median(test["rms"])) if len(points) else 0.0
+    return Walls(seen[nbrs].mean(axis=1) >= AMBIGUOUS_SHARE, walls, scatter)

@@ -77,6 +77,17 @@ def test_close_sheets_are_flagged_without_normals_and_told_apart_by_normals_faci
     assert close_walls(p, same_way).ambiguous.mean() > 0.95
 
 
+def test_clouds_too_small_for_two_groups_see_no_walls():
+    """The two-sheet test needs three points in each group: a cloud of 0-8 points (of 5-8, argmax and argmin
+    of empty sequences raised) has no walls, nothing ambiguous, with normals or without, and a finite scatter."""
+    rng = np.random.default_rng(0)
+    for n in range(9):
+        points, normals = rng.normal(size=(n, 3)), rng.normal(size=(n, 3))
+        for walls in (close_walls(points), close_walls(points, normals)):
+            assert walls.walls.shape == walls.ambiguous.shape == (n,)
+            assert not walls.walls.any() and not walls.ambiguous.any() and np.isfinite(walls.scatter)
+
+
 def test_one_sheet_is_not_flagged_clean_or_noisy():
     p, _, _ = sheets([0.0], [1.0])
     bumpy = p.copy()
