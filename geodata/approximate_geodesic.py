@@ -103,7 +103,13 @@ class ApproximateGeodesicSolver:
         if threads is None:
             threads = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
         sources = np.ascontiguousarray(sources, dtype=np.int64)
-        fields = self._native.distances(sources, threads=max(1, int(threads)), **self.gates)
+        try:
+            fields = self._native.distances(sources, threads=max(1, int(threads)), **self.gates)
+        except MemoryError:  # on any thread: each needs ~100 bytes a face
+            raise MemoryError(f"approximate geodesic fields of {len(sources)} sources on {self.n_vertices:,} "
+                              f"vertices: out of memory (~{100 * self.n_vertices * 2 / 2 ** 20:.0f} MiB a thread, "
+                              f"{threads} threads, and the fields' {8 * len(sources) * self.n_vertices / 2 ** 20:.0f} "
+                              f"MiB)") from None
         if self._mesh is not None and len(sources):
             _exact_where_impossible(fields, sources, *self._mesh)
         return fields

@@ -182,3 +182,31 @@ def test_a_vertex_of_forty_thousand_faces_is_a_cone_apex():
     slant = np.hypot(1.0, 0.3)
     np.testing.assert_allclose(d[1:-1], slant, rtol=1e-12)
     np.testing.assert_allclose(d[-1], 2 * slant, rtol=1e-6)  # around the rim, straight in the unfolding
+
+
+def test_running_out_of_memory_on_a_worker_thread_is_a_memory_error(tmp_path):
+    """std::bad_alloc on a worker thread (run_parts, src/threads.h) left its thread: std::terminate, the process
+    aborted. Under an address-space limit just above what the solver holds, fields on two threads are a
+    MemoryError that says how much they need, and the process goes on."""
+    script = tmp_path / "limited.py"
+    script.write_text(f"""
+import resource, sys
+import numpy as np
+sys.path.insert(0, {str(Path(__file__).resolve().parents[1])!r})
+from flat_meshes import grid
+from geodata.approximate_geodesic import ApproximateGeodesicSolver
+mesh = grid(300)
+solver = ApproximateGeodesicSolver(mesh.vertices, mesh.faces)
+held = int(open("/proc/self/statm").read().split()[0]) * resource.getpagesize()
+resource.setrlimit(resource.RLIMIT_AS, (held + (24 << 20), resource.RLIM_INFINITY))
+try:
+    solver.distances([0, 1, 2, 3], threads=2)
+except MemoryError as e:
+    print("MemoryError:", e)
+""")
+    import subprocess
+    import sys
+
+    run = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert "MemoryError: approximate geodesic fields of 4 sources on 90,000 vertices: out of memory" in run.stdout
