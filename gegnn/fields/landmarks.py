@@ -56,6 +56,8 @@ TIE = 1e-9  # farthest-point ties: relative to the largest distance
 HEAT_MIN_VERTICES = 500  # below, or for fewer fields, potpourri3d's own solver is faster (its setup is)
 HEAT_MIN_FIELDS = 32
 SPLIT_PATHS_UP_TO = 256  # pinched vertices a part's fields pass through (_SplitVertexPaths: memory 8 N B each)
+SPLIT_CHUNK = 16  # copy fields _SplitVertexPaths solves at once
+SPLIT_BLOCK = 8192  # vertices it closes at once (temporaries of P x this floats)
 
 
 @dataclass
@@ -197,7 +199,9 @@ class _SplitVertexPaths:
 
     which takes every path that passes split vertices, in any order, and makes a source at a split vertex the
     source on every fan. Costs one field a copy, once a part (a proxy's decimation makes a few), and
-    :math:`P` minima a field; memory :math:`P N` floats."""
+    :math:`P` minima a field. Memory: :math:`P N` floats (8 N bytes a split vertex, ``SPLIT_PATHS_UP_TO`` at
+    most: 2 GiB at 1M vertices), and while they are made, ``SPLIT_CHUNK`` copy fields at a time (twice: the
+    solver's and their fold, 16 B N' each) and :math:`P` x ``SPLIT_BLOCK`` floats of the closure."""
 
     def __init__(self, solver, origin: np.ndarray, n: int):
         self.origin, self.n = origin, n
@@ -209,20 +213,20 @@ class _SplitVertexPaths:
                           stacklevel=3)
             split = split[:SPLIT_PATHS_UP_TO]
         self.split = split
-        if not len(split):
-            self.through = np.zeros((0, n))
-            return
-        copies = np.concatenate([split, n + np.flatnonzero(np.isin(origin[n:], split))])
-        d = self.fold(solver.distances(copies, threads=threads.count())).T  # (copies, n)
         through = np.full((len(split), n), np.inf)
-        np.minimum.at(through, np.searchsorted(split, origin[copies]), d)
+        copies = np.concatenate([split, n + np.flatnonzero(np.isin(origin[n:], split))])
+        for s in range(0, len(copies), SPLIT_CHUNK):
+            chunk = copies[s:s + SPLIT_CHUNK]
+            d = self.fold(solver.distances(chunk, threads=threads.count()))  # (n, chunk)
+            np.minimum.at(through, np.searchsorted(split, origin[chunk]), d.T)
         hops = through[:, split]  # (P, P): split vertex to split vertex, one fan crossing
         for k in range(len(split)):
             hops = np.minimum(hops, hops[:, k, None] + hops[None, k, :])
-        closed = through.copy()
-        for q in range(len(split)):
-            closed = np.minimum(closed, hops[:, q, None] + through[None, q, :])
-        self.through = closed
+        for s in range(0, n, SPLIT_BLOCK):  # closed in place, a block of vertices at a time: a row already
+            block = through[:, s:s + SPLIT_BLOCK]  # closed through some q is no shorter than its closure (hops
+            for q in range(len(split)):            # are closed), so the result is that of the unclosed rows
+                np.minimum(block, hops[:, q, None] + block[q], out=block)
+        self.through = through
 
     def fold(self, d: np.ndarray) -> np.ndarray:
         """Copy fields (S, N') -> (N, S), each input vertex at the least of its copies' values."""

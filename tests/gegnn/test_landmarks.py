@@ -153,6 +153,44 @@ def test_paths_through_a_pinched_vertex_are_taken_from_fan_to_fan(monkeypatch, s
         assert error.mean() < 0.002 and error.max() < 0.01
 
 
+def test_paths_through_pinched_vertices_are_made_in_bounded_chunks(monkeypatch):
+    """Four spheres in a row, each touching the next at a vertex (three pinched vertices, six copy fields): the
+    copy fields are solved SPLIT_CHUNK at a time and closed SPLIT_BLOCK vertices at a time (all at once before:
+    (>= 2 P) x N' floats and a transposed copy, ~12 GB at 1M vertices with 256 pinched vertices), with the
+    paths of solving them all at once."""
+    from geodata.approximate_geodesic import ApproximateGeodesicSolver, manifold_copy
+
+    ball = trimesh.creation.icosphere(2)
+    left = int(np.argmin(ball.vertices[:, 0]))
+    right = int(np.argmax(ball.vertices[:, 0]))
+    step = ball.vertices[right] - ball.vertices[left]
+    chain = trimesh.util.concatenate([ball.copy().apply_translation(i * step) for i in range(4)])
+    chain.merge_vertices()
+    v, f = np.asarray(chain.vertices), np.asarray(chain.faces)
+    assert len(v) == 4 * len(ball.vertices) - 3
+    cv, cf, origin, _ = manifold_copy(v, f)
+    solver = ApproximateGeodesicSolver(cv, cf)
+    asked = []
+
+    class Counting:
+        def distances(self, sources, threads=None):
+            asked.append(len(sources))
+            return solver.distances(sources, threads=threads)
+
+    monkeypatch.setattr(landmarks_module, "SPLIT_CHUNK", 1000)
+    monkeypatch.setattr(landmarks_module, "SPLIT_BLOCK", 10 ** 9)
+    whole = landmarks_module._SplitVertexPaths(Counting(), origin, len(v))
+    assert asked == [6]
+    monkeypatch.setattr(landmarks_module, "SPLIT_CHUNK", 4)
+    monkeypatch.setattr(landmarks_module, "SPLIT_BLOCK", 7)
+    asked.clear()
+    chunked = landmarks_module._SplitVertexPaths(Counting(), origin, len(v))
+    assert asked == [4, 2]
+    np.testing.assert_allclose(chunked.through, whole.through, rtol=1e-12)
+    # the first contact reaches the far pole of the last sphere through the other two: about 3 pi
+    assert np.isfinite(chunked.through).all() and chunked.through.max() > 2.8 * np.pi
+
+
 @pytest.mark.parametrize("output", ["ratio", "interval"])
 def test_decoder_invariant_to_landmark_order_symmetric_zero_on_diagonal(output):
     k = 12
