@@ -13,7 +13,7 @@ prepares the solver (``geodesic_solver``: the refusal check, then the mesh's hal
 source 0 and reports the seconds of each step (and the solve's CPU seconds, which other work on the
 machine inflates less) and its peak resident memory over what it held before the
 solver (the tables, the wavefront and the distances: the memory a solve needs), with the estimate
-:func:`geodata.geodesic.exact_memory_estimate` beside it. libigl runs the same source on meshes up to
+:func:`geodata.exact_memory.exact_memory_estimate` beside it. libigl runs the same source on meshes up to
 ``--libigl-max`` vertices (it keeps every window: minutes and gigabytes beyond), and the largest
 relative difference of the two is reported. A size whose estimate exceeds the memory available here is
 skipped, not run. The fits are least squares of log(CPU seconds) and log(memory) on log(N) over the
@@ -102,7 +102,7 @@ def gib(b: float) -> str:
 
 
 def main():
-    from geodata.geodesic import available_memory, exact_memory_estimate
+    from geodata.exact_memory import available_memory, exact_memory_estimate
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--kinds", nargs="+", default=["irregular", "regular"])

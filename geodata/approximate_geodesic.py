@@ -134,13 +134,13 @@ def _exact_where_impossible(fields: np.ndarray, sources: np.ndarray, vertices: n
     if not bad:
         return
     from geodata._exact_geodesic import Surface
-    from geodata.geodesic import _require_memory
+    from geodata.exact_memory import require_memory
     from geodata.mesh import MeshError
 
     what = (f"{len(bad)} of {len(sources)} approximate geodesic fields put a vertex over {SHORTER:.0%} nearer than "
             f"the straight line (e.g. from vertex {int(sources[bad[0]])})")
     try:
-        _require_memory(len(vertices))
+        require_memory(len(vertices))
         fields[bad] = Surface(vertices, faces.astype(np.int32)).distances(sources[bad])
     except (MeshError, ValueError, RuntimeError) as e:
         warnings.warn(f"{what}; the exact solver refused the mesh ({e}): kept", stacklevel=3)

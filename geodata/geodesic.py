@@ -25,65 +25,24 @@ from typing import Callable
 
 import numpy as np
 
+from geodata.exact_memory import require_memory
 from geodata.mesh import Mesh, MeshError, require_closed_manifold, vertex_components
 
 __all__ = ["BACKENDS", "APPROXIMATE", "geodesic_solver", "exact_geodesic_distances", "sample_sources",
-           "exact_geodesic_pairs", "approximation_error", "PROBED_UP_TO", "polyline_length", "edge_flip_paths",
-           "exact_memory_estimate", "available_memory"]
+           "exact_geodesic_pairs", "approximation_error", "PROBED_UP_TO", "polyline_length", "edge_flip_paths"]
 
 BACKENDS = ("vtp", "gdist", "libigl", "vsp")
 APPROXIMATE = ("vsp",)  # the approximate backends (their errors: the module docstring, docs/benchmarks.md)
-# The vtp solver keeps the mesh's half-edge tables (~430 bytes a vertex) and only the wavefront of a source
-# (the windows waiting to cross a face, in chunks that the next ones reuse: ~50 MiB at 1M vertices).
-# The peak resident memory of building the solver and one solve, over what the process held before,
-# 5k-1M vertices, regular and irregular meshes, grew linearly: 9 MiB at 10k, 162 MiB at 320k, 458 MiB at
-# 1M, within 1% of MEMORY_BASE + MEMORY_SCALE N^MEMORY_POWER bytes or under it (benchmarks/
-# bench_exact_scaling.py, docs/benchmarks.md); MEMORY_MARGIN over it for meshes whose wavefront is
-# longer. (Keeping every window instead costs ~40 N^1.5 bytes, 47 GiB at 1M.)
-MEMORY_BASE, MEMORY_SCALE, MEMORY_POWER, MEMORY_MARGIN = 8 << 20, 500.0, 1.0, 1.25
-
-
-def exact_memory_estimate(n_vertices: int) -> int:
-    """Bytes the vtp solver is expected to allocate for one source on a mesh of ``n_vertices`` (with
-    MEMORY_MARGIN over the measured fit; meshes of other shapes and qualities vary around it)."""
-    return int(MEMORY_MARGIN * (MEMORY_BASE + MEMORY_SCALE * float(n_vertices) ** MEMORY_POWER))
-
-
-def available_memory() -> int:
-    """Bytes this process may still allocate: its RLIMIT_DATA less its data segment (``run_isolated``
-    under --max-memory sets it) where set; else the least of the cgroup's memory limit and the
-    machine's MemAvailable (on Windows, without rlimits or /proc: no limit known)."""
-    from geodata.parallel import _cgroup_memory, _status_kib
-
-    try:
-        import resource
-    except ImportError:  # Windows
-        resource = None
-    soft = resource.getrlimit(resource.RLIMIT_DATA)[0] if resource else None
-    if resource and soft != resource.RLIM_INFINITY:
-        return max(0, soft - _status_kib("VmData:", "/proc/self/status") * 1024)
-    limits = [m for m in (_cgroup_memory(), _status_kib("MemAvailable:", "/proc/meminfo") * 1024) if m]
-    return min(limits) if limits else 1 << 62
-
-
-def _require_memory(n_vertices: int) -> None:
-    """MeshError("geodesic", ...) before a solve whose estimate exceeds the memory available."""
-    need, have = exact_memory_estimate(n_vertices), available_memory()
-    if need > have:
-        raise MeshError("geodesic", f"the exact solver would need ~{need / 2 ** 30:.1f} GiB for one source on "
-                                    f"{n_vertices} vertices; {have / 2 ** 30:.1f} GiB available")
-
-
 def geodesic_solver(mesh: Mesh, backend: str = "vtp") -> Callable[[int], np.ndarray]:
     """A function source -> exact geodesic distances (float64, (N,)) from that vertex to every vertex.
 
     Only distances within the source's connected component are meaningful (vtp and gdist give inf
     elsewhere, libigl 0). Whatever a backend precomputes for the mesh is done once, here. A mesh whose
-    one-source vtp solve is estimated to need more memory than is available (:func:`exact_memory_estimate`,
-    :func:`available_memory`) is refused here, before anything is allocated, with MeshError("geodesic").
+    one-source vtp solve is estimated to need more memory than is available
+    (:func:`geodata.exact_memory.require_memory`) is refused here, before anything is allocated, with MeshError("geodesic").
     """
     if backend == "vtp":
-        _require_memory(mesh.n_vertices)
+        require_memory(mesh.n_vertices)
         from geodata._exact_geodesic import Surface
 
         surface = Surface(np.ascontiguousarray(mesh.vertices, dtype=np.float64),

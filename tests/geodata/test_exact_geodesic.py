@@ -181,7 +181,7 @@ def test_large_meshes_equal_gdist(name):
 def test_a_solve_fits_its_memory_estimate():
     """40,962 vertices under RLIMIT_DATA set to the estimate (~29 MiB over what the child holds): the tables and
     the wavefront fit (every window kept, the solver needed ~300 MiB here)."""
-    from geodata.geodesic import exact_memory_estimate
+    from geodata.exact_memory import exact_memory_estimate
     from geodata.parallel import run_isolated
 
     mesh = regular(6)

@@ -2,8 +2,9 @@
 import numpy as np
 import pytest
 
-from geodata import geodesic
-from geodata.geodesic import available_memory, exact_memory_estimate, geodesic_solver
+from geodata import exact_memory
+from geodata.exact_memory import available_memory, exact_memory_estimate
+from geodata.geodesic import geodesic_solver
 from geodata.mesh import Mesh, MeshError
 from geodata.parallel import run_isolated
 
@@ -25,7 +26,7 @@ def test_a_solve_over_the_available_memory_is_refused_before_the_solver_is_built
 
     mesh = sphere()
     need = exact_memory_estimate(mesh.n_vertices)
-    monkeypatch.setattr(geodesic, "available_memory", lambda: need - 1)
+    monkeypatch.setattr(exact_memory, "available_memory", lambda: need - 1)
     monkeypatch.setattr(native, "Surface", lambda *a: pytest.fail("the solver was built"))
     with pytest.raises(MeshError) as err:
         geodesic_solver(mesh)
@@ -37,7 +38,7 @@ def test_a_solve_over_the_available_memory_is_refused_before_the_solver_is_built
 
 def test_a_solve_within_the_available_memory_runs(monkeypatch):
     mesh = sphere()
-    monkeypatch.setattr(geodesic, "available_memory", lambda: exact_memory_estimate(mesh.n_vertices))
+    monkeypatch.setattr(exact_memory, "available_memory", lambda: exact_memory_estimate(mesh.n_vertices))
     d = geodesic_solver(mesh)(0)
     assert np.isfinite(d).all() and d[0] == 0 and d.max() > 2.5  # half a great circle of the unit sphere: pi
 

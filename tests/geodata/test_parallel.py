@@ -249,7 +249,8 @@ def test_without_fork_and_resource_as_on_windows_both_programs_import_and_a_mesh
         from geodata.cli import main as geodata_main
         from gegnn.cli import main as gegnn_main
         import numpy as np, trimesh
-        from geodata.geodesic import available_memory, geodesic_solver
+        from geodata.exact_memory import available_memory
+        from geodata.geodesic import geodesic_solver
         from geodata.mesh import Mesh
         from geodata.parallel import run_isolated
         assert available_memory() > 0
