@@ -134,6 +134,17 @@ def test_subpackages_import_nothing_when_opened():
             assert all(room(d) == room(name) for d in GRAPH[name]), name
 
 
+def test_a_subpackage_that_lists_its_modules_lists_them_all():
+    """A sub-package's docstring that names its modules (``:mod:`~gegnn.fields.heat```) names every one: the
+    fields' named the heat method's and not the virtual sources' on clouds, nor the close walls' sides."""
+    for name, path in MODULES.items():
+        doc = ast.get_docstring(ast.parse(path.read_text(encoding="utf-8"))) or ""
+        if path.name != "__init__.py" or name == "gegnn" or f":mod:`~{name}." not in doc:
+            continue
+        own = [m for m in MODULES if m.startswith(name + ".") and m.count(".") == name.count(".") + 1]
+        assert not [m for m in own if f"~{m}`" not in doc and f"~{m}." not in doc], name  # a module, or a name in it
+
+
 def test_the_layers_stack_at_most_max_floors_deep():
     graph = _room_graph()
     floors = {}

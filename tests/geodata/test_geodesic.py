@@ -102,3 +102,17 @@ def test_a_source_that_leaves_a_vertex_unreached_is_replaced(monkeypatch):
     assert len(pairs) >= 1000 and np.isfinite(dist).all()
     kept = np.isin(clean[:, 0], pairs[:, 0])  # the other sources are the same, with the same values
     assert np.array_equal(clean[kept], pairs[: kept.sum()])
+
+
+def test_the_approximate_backends_speed_is_stated_one_way():
+    """The module's docstring and `geodata prepare --help` state the same speed-up of vsp over vtp (the
+    docstring said "an order of magnitude", the help 6-8x, as docs/benchmarks.md measured)."""
+    import re
+
+    import geodata.geodesic
+    from click.testing import CliRunner
+    from geodata.cli import main
+
+    text = " ".join(CliRunner().invoke(main, ["prepare", "--help"], terminal_width=1000).output.split())
+    stated = re.findall(r"(\S+x) faster than vtp", text)
+    assert stated and set(stated) == set(re.findall(r"(\S+x) faster than\s+vtp", geodata.geodesic.__doc__))
