@@ -4,8 +4,9 @@ figure's value with the command that measured it, today's date and this machine'
 ``<!-- end generated -->`` (the benchmark's ``--write``), COMMAND being the benchmark's command line without
 ``--write``. tests/test_docs_prose_figures.py takes the figures of such a table as generated.
 
-The pages that state a figure are then checked against the file by tests/test_docs_figures.py: after a
-run that records, that test names every page whose figure changed.
+A recorded figure is then written into the pages that state it (between ``<!-- results.KEY -->`` and
+``<!-- /results -->``: docs/_ext/results_hook.py), and tests/test_docs_figures.py checks them against the file
+(README.md states its figures unmarked: that test names a README figure that changed).
 """
 from __future__ import annotations
 
@@ -67,3 +68,15 @@ def record(key: str, value: str, what: str | None = None, source: str | None = N
     data["figures"][key] = {field: entry[field] for field in ("value", "what", "command", "date", "cpu", "source")}
     path.write_text(json.dumps(data, indent=2, ensure_ascii=False) + "\n")
     print(f"docs/results.json: {key} = {value}")
+    if path == RESULTS:
+        pages = _results_hook().write_pages(ROOT, RESULTS)
+        print(f"written into {', '.join(pages)}" if pages else "no page marks it")
+
+
+def _results_hook():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("results_hook", ROOT / "docs" / "_ext" / "results_hook.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module

@@ -1,11 +1,11 @@
 """The key figures of README.md and the docs agree with docs/results.json, one value per fact.
 
 docs/results.json holds each figure once, with the command, date and CPU that measured it. A guide page in
-docs/ states one as ``{{ results.KEY }}``, which the site's hook (docs/_ext/results_hook.py) replaces with the
-file's value; README.md, read on its own, states the values. Each CLAIM below finds where a page states a
-figure, read as the site shows it (the regex's group is the figure, its surroundings say which model and what
-quantity); the test fails when a page states it differently, or when a claim no longer finds its sentence (a
-rewritten page must be tied to the file again, not silently drop out of the check).
+docs/ states one in place between marks naming its key (``<!-- results.KEY -->0.25%<!-- /results -->``), which
+docs/_ext/results_hook.py writes from the file and checks; README.md states the values unmarked. Each CLAIM below
+finds where a page states a figure, read as a reader sees it (the regex's group is the figure, its surroundings
+say which model and what quantity); the test fails when a page states it differently, or when a claim no longer
+finds its sentence (a rewritten page must be tied to the file again, not silently drop out of the check).
 """
 import importlib.util
 import json
@@ -163,7 +163,7 @@ def mismatches(claims, figures_, read):
 
 
 def read_page(page):
-    """The page as the site shows it: its ``{{ results.KEY }}`` replaced by the figures' values."""
+    """The page as a reader sees it: its marks of figures of docs/results.json gone, the figures in place."""
     return results_hook.render((ROOT / page).read_text(encoding="utf-8"))
 
 
@@ -236,21 +236,51 @@ def test_a_benchmark_records_a_figure_with_its_command_date_and_cpu(tmp_path, mo
         record("mre.landmark-v9", "0.5%", path=path)
 
 
-def test_the_site_fills_every_placeholder_from_the_results_file():
-    """mkdocs runs the hook; every {{ results.KEY }} of every page names a figure of the file (the build would
-    fail on another); a placeholder is replaced by its value and an unknown key is refused by name."""
+def test_every_marked_figure_is_the_results_file_s_and_no_placeholder_is_left():
+    """The pages state each figure of docs/results.json in place, between marks naming its key, so a forge, an
+    editor and the site all show the value (``{{ results.KEY }}`` placeholders showed as such everywhere but the
+    site): every mark names a figure of the file and states its value; a page out of step is found, named, and
+    rewritten by the writer; mkdocs runs the same check."""
     assert re.search(r"(?m)^hooks:\n  - docs/_ext/results_hook\.py$", (ROOT / "mkdocs.yml").read_text())
     figs = figures()
     used = set()
-    for page in sorted((ROOT / "docs").rglob("*.md")):
+    for page in results_hook.pages(ROOT):
         text = page.read_text(encoding="utf-8")
-        used |= set(results_hook.PLACEHOLDER.findall(text))
-        assert "{{" not in results_hook.render(text), f"{page}: a placeholder not of the form {{{{ results.KEY }}}}"
+        assert "{{ results." not in text and "{{results." not in text, f"{page}: a placeholder left"
+        used |= {key for key, _ in results_hook.MARKED.findall(text)}
+        assert results_hook.stale(text, figs) == [], page
+        assert "<!-- results" not in results_hook.render(text) and "<!-- /results" not in results_hook.render(text)
     assert used and used <= set(figs)
-    assert results_hook.render("at {{ results.mre.landmark-v3 }}, {{results.time.paper}}.") == (
-        f"at {figs['mre.landmark-v3']['value']}, {figs['time.paper']['value']}.")
+    page = "at <!-- results.mre.landmark-v3 -->9.99%<!-- /results -->, <!-- results.time.paper -->1 s<!-- /results -->."
+    assert results_hook.stale(page, figs) == [(1, "mre.landmark-v3", "9.99%", figs["mre.landmark-v3"]["value"]),
+                                              (1, "time.paper", "1 s", figs["time.paper"]["value"])]
+    written = results_hook.write(page, figs)
+    assert results_hook.stale(written, figs) == []
+    assert results_hook.render(written) == f"at {figs['mre.landmark-v3']['value']}, {figs['time.paper']['value']}."
     with pytest.raises(KeyError, match="mre.landmark-v9"):
-        results_hook.render("{{ results.mre.landmark-v9 }}")
+        results_hook.write("<!-- results.mre.landmark-v9 -->1%<!-- /results -->", figs)
+
+
+def test_a_figure_changed_in_the_results_file_is_written_into_every_page_that_states_it(tmp_path):
+    """results_hook.write_pages, as ``python docs/_ext/results_hook.py`` and a benchmark's --record run it: a new
+    value in the file goes into each page that marks the figure, and only there."""
+    import shutil
+
+    (tmp_path / "docs").mkdir()
+    for page in results_hook.pages(ROOT):
+        shutil.copy(page, tmp_path / page.relative_to(ROOT))
+    data = json.loads(RESULTS.read_text())
+    data["figures"]["mre.landmark-v4"]["value"] = "0.01%"
+    results = tmp_path / "docs" / "results.json"
+    results.write_text(json.dumps(data))
+    before = {p.name: p.read_text() for p in results_hook.pages(tmp_path)}
+    assert results_hook.stale(before["index.md"], data["figures"])  # out of step until written
+    changed = results_hook.write_pages(tmp_path, results)
+    marks = [p for p in results_hook.pages(ROOT) if "<!-- results.mre.landmark-v4 -->" in p.read_text()]
+    assert sorted(changed) == sorted(str(p.relative_to(ROOT)) for p in marks) and "docs/index.md" in changed
+    for page in results_hook.pages(tmp_path):
+        assert results_hook.stale(page.read_text(), data["figures"]) == []
+    assert "**0.01%**" in results_hook.render((tmp_path / "docs" / "index.md").read_text())
 
 
 def test_the_estimates_for_1k_to_50k_meshes_follow_from_the_measured_costs():
