@@ -1,7 +1,6 @@
 """What the exact solver (``vtp``, ``src/exact_geodesic.cpp``) needs in memory, and what this process may still
-allocate: a solve that would not fit is refused before anything is allocated. Shared by the ``vtp`` backend
-(:func:`geodata.geodesic.geodesic_solver`) and the approximate solver's exact re-solve
-(:mod:`geodata.approximate_geodesic`), below both."""
+allocate: a solve that would not fit is refused before anything is allocated (:func:`require_memory`, which the
+``vtp`` backend of :func:`geodata.geodesic.geodesic_solver` calls)."""
 from __future__ import annotations
 
 from geodata.mesh import MeshError

@@ -1,14 +1,11 @@
 """The field solver on the shape zoo (geodata.zoo) against the exact solver: every shape at a small size
-within the stated tolerance, the torus without a systematic shortcut, and the exact fallback for a field
-that cannot be right (docs/benchmarks.md, "The shape zoo", has the full-size table)."""
-import warnings
-
+within the stated tolerance, the torus without a systematic shortcut (docs/benchmarks.md, "The shape zoo",
+has the full-size table)."""
 import numpy as np
 import pytest
 
-from geodata import approximate_geodesic
 from geodata._exact_geodesic import Surface
-from geodata.approximate_geodesic import ApproximateGeodesicSolver, approximate_geodesic_distances
+from geodata.approximate_geodesic import approximate_geodesic_distances
 from geodata.zoo import ZOO, zoo_mesh
 
 
@@ -40,34 +37,3 @@ def test_a_coil_is_near_exact():
     v, f = zoo_mesh("coil", 0.5)
     r = signed_errors(v, f, [0, len(v) // 2])
     assert np.abs(r).mean() < 0.004 and r.mean() > -0.001
-
-
-class Shortened:
-    """The native solver, its fields made 20% short: a field no surface can have."""
-
-    def __init__(self, native):
-        self.native = native
-
-    def distances(self, sources, **kw):
-        return 0.8 * self.native.distances(sources, **kw)
-
-
-def test_a_field_nearer_than_the_straight_line_is_solved_exactly():
-    v, f = zoo_mesh("torus-r0.3", 0.2)
-    solver = ApproximateGeodesicSolver(v, f)
-    solver._native = Shortened(solver._native)
-    with pytest.warns(UserWarning, match="2 of 2 approximate geodesic fields .* solved exactly"):
-        d = solver.distances([0, 300], threads=1)
-    np.testing.assert_allclose(d, Surface(v, f.astype(np.int32)).distances(np.array([0, 300])), rtol=1e-12)
-
-
-def test_fields_that_pass_the_check_are_kept_without_a_warning(monkeypatch):
-    v, f = zoo_mesh("torus-r0.3", 0.2)
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        kept = ApproximateGeodesicSolver(v, f).distances([0, 300], threads=1)
-    monkeypatch.setattr(approximate_geodesic, "SHORTER", -1.0)  # every field fails: all exact
-    with pytest.warns(UserWarning, match="solved exactly"):
-        exact = ApproximateGeodesicSolver(v, f).distances([0, 300], threads=1)
-    assert not np.array_equal(kept, exact)
-    np.testing.assert_allclose(kept, exact, rtol=0.05)
