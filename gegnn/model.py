@@ -4,6 +4,7 @@ to a distance."""
 from __future__ import annotations
 
 from collections.abc import Callable
+import dataclasses
 from contextlib import nullcontext
 
 import numpy as np
@@ -14,7 +15,7 @@ from geodata.mesh import Mesh, unique_edges, vertex_normals
 from geodata.stages.normalize import normalization
 
 from .checkpoint import load_checkpoint, save_checkpoint
-from .config import GeGnnConfig
+from .config import LANDMARK_FIELDS, GeGnnConfig
 from .decoders import DistanceDecoder, LandmarkDecoder, SpectralDecoder
 from .fields.cache import FieldSpec
 from .graph import Graph, mesh_graph
@@ -122,7 +123,7 @@ class GeGnn(nn.Module):
 
     # -- inference on raw meshes -----------------------------------------------------------------------
     def embed(self, vertices: np.ndarray, faces: np.ndarray | None = None, device=None, precision: str = "fp32",
-              normals: np.ndarray | None = None, proxy="auto"):
+              normals: np.ndarray | None = None, proxy="auto", fields: str | None = None):
         """Embed one mesh, or for a point-cloud model (``config.points``) one point cloud, given as NumPy
         arrays in any units (one forward pass).
 
@@ -145,7 +146,9 @@ class GeGnn(nn.Module):
         gets the blend of its 3 nearest subset points' codes. With more than one torch thread
         (``torch.set_num_threads``) the U-Net runs on a thread of its own while the fields are computed,
         and a cloud's row-wise steps are spread over the threads (:mod:`gegnn.threads`); the result is the
-        same to the bit.
+        same to the bit. ``fields``: a landmark model's fields by another solver than the one it was trained
+        on (its config's ``landmark_fields``; None: those), e.g. ``"exact"``, the exact solver's: the ceiling of
+        the fields, at 6-8x a vsp field's time (docs/queries.md).
 
         Returns:
             :class:`gegnn.queries.embedding.Embedding`
@@ -158,7 +161,7 @@ class GeGnn(nn.Module):
         with torch.inference_mode():
             target = proxy_size(len(vertices), proxy)
             if target is None:
-                return self._embed(vertices, faces, precision, normals, requested)
+                return self._embed(vertices, faces, precision, normals, requested, fields)
             if self.config.points:  # a cloud: a subset embedded, each point blended from its 3 nearest there
                 points = np.asarray(vertices, dtype=np.float64)
                 subset = cloud_subset(points, target)
@@ -170,12 +173,17 @@ class GeGnn(nn.Module):
                                    scatter=emb.scatter)
             vertices, faces = _validated(vertices, faces)
             proxy = proxy_of(vertices, faces, target)  # each vertex's closest point on its part's proxy
-            return self._embed(proxy.mesh.vertices, proxy.mesh.faces, precision, None, requested).at_points(
+            return self._embed(proxy.mesh.vertices, proxy.mesh.faces, precision, None, requested, fields).at_points(
                 proxy.face, proxy.bary, vertices=vertices, faces=faces)
 
-    def _embed(self, vertices, faces, precision, normals, requested):
+    def _embed(self, vertices, faces, precision, normals, requested, fields=None):
         """One forward pass with the network in ``precision`` ("fp32" or "bf16"); the embedding's decoder
-        gets the ``requested`` precision to resolve."""
+        gets the ``requested`` precision to resolve; ``fields``: :meth:`embed`'s."""
+        if fields is not None and (fields not in LANDMARK_FIELDS or not self.config.landmarks or self.config.points
+                                   or (fields == "exact" and faces is None)):
+            raise ValueError(f"fields={fields!r}: a mesh landmark model reads fields by one of "
+                             f"{', '.join(LANDMARK_FIELDS)}; this model has {self.config.landmarks} landmarks"
+                             f"{' on point clouds' if self.config.points else ''}")
         device = next(self.parameters()).device
         if self.config.points:
             if faces is not None:
@@ -185,7 +193,8 @@ class GeGnn(nn.Module):
             if faces is None:
                 raise ValueError("this model embeds meshes: give faces, or use a point-cloud model "
                                  "(trained with gegnn train --neighbors)")
-            (hierarchy, fields, scale), expand, part, walls = self.inputs(vertices, faces, device), None, None, None
+            hierarchy, fields, scale = self.inputs(vertices, faces, device, fields)
+            expand, part, walls = None, None, None
         was_training = self.training
         self.eval()
 
@@ -209,7 +218,8 @@ class GeGnn(nn.Module):
         sides = {} if walls is None else dict(ambiguous=walls.ambiguous, walls=walls.walls, scatter=walls.scatter)
         return Embedding(codes, self.distance, scale, requested, vertices=vertices, faces=faces, part=part, **sides)
 
-    def inputs(self, vertices: np.ndarray, faces: np.ndarray, device) -> tuple[Callable, Callable, float]:
+    def inputs(self, vertices: np.ndarray, faces: np.ndarray, device, fields: str | None = None
+               ) -> tuple[Callable, Callable, float]:
         """What the network reads for one mesh in any units, as two functions that :meth:`embed` runs side
         by side (the U-Net does not read the fields; their codes do): one giving the GeoPool hierarchy of
         the normalized mesh (bounding box centered, longest half-extent 1), one the landmark fields or
@@ -220,6 +230,8 @@ class GeGnn(nn.Module):
         scale = scale or 1.0  # a single point: keep units
         mesh = Mesh((vertices - center) / scale, faces)
         spec = FieldSpec.of(self.config)
+        if fields is not None:  # another solver's landmark fields (embed's ``fields``)
+            spec = dataclasses.replace(spec, solver=fields)
 
         def hierarchy():
             graph = self.mesh_graph(mesh.vertices, vertex_normals(mesh), unique_edges(mesh.faces))

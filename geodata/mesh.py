@@ -7,7 +7,7 @@ import numpy as np
 
 __all__ = ["Mesh", "MeshError", "one_line", "unique_edges", "edge_face_counts", "closed_manifold_problem",
            "vertex_components", "label_groups", "component_volumes", "face_areas", "degenerate_faces",
-           "vertex_normals", "require_closed_manifold"]
+           "vertex_normals", "require_closed_manifold", "has_pinched_vertices"]
 
 
 class MeshError(Exception):
@@ -112,14 +112,14 @@ def closed_manifold_problem(mesh: Mesh, *, zero_area_ok: bool = False) -> str | 
         return "unreferenced vertices"
     # Vertex-manifold: around a closed manifold vertex the faces form one fan, so V - E + F per
     # vertex link holds; a pinched vertex (two fans) shows up as more link cycles than vertices.
-    if _pinched_vertices(f, len(v)):
+    if has_pinched_vertices(f, len(v)):
         return "non-manifold (pinched) vertices"
     if (component_volumes(mesh) <= 0).any():
         return "inward-oriented (or zero-volume) component"
     return None
 
 
-def _pinched_vertices(faces: np.ndarray, n: int) -> bool:
+def has_pinched_vertices(faces: np.ndarray, n: int) -> bool:
     """True when some vertex has more than one fan of faces (counted by union-find over its link)."""
     # Each face contributes, for each corner, the link edge (next, prev). A vertex is manifold when
     # its link edges form exactly one cycle; count cycles per vertex via connected components.

@@ -24,8 +24,8 @@ validation clouds, clean and noisy, 0-0.3% of the points are flagged but for the
 teapot 49% clean: ``benchmarks/bench_close_walls.py --store``.)
 A point is *ambiguous* where at least ``AMBIGUOUS_SHARE`` (three in ten) of it and its nearest are such
 points whose other sheet the normals do not tell apart: no normals given, or over ``FACING_SHARE`` (a quarter)
-of the other group facing the point's side (:math:`n_p \cdot n_q > 0`), where a wall's other side faces away. Noise as large as the gap between two
-sheets hides them (their offsets then spread as one sheet's do): a cloud's ``scatter``, the median RMS
+of the other group facing the point's side (:math:`n_p \cdot n_q > 0`), where a wall's other side faces away.
+Noise as large as the gap between two sheets hides them (their offsets then spread as one sheet's do): a cloud's ``scatter``, the median RMS
 offset in spacings, says how much there is.
 """
 from __future__ import annotations

@@ -100,8 +100,9 @@ def landmark_fields(vertices, faces, k: int, seed: int = 0, t_coef: float = T_CO
         t_coef: heat-method time step (potpourri3d ``t_coef``).
         batch: landmarks chosen a round (:func:`batched_farthest_point_fields`; 1: sequential sampling;
             default FPS_BATCH).
-        fields: ``"heat"`` (the shipped models' up to v2) or ``"vsp"`` (0.1-0.3% from exact, ~1.6 ms a field
-            at 5k vertices: :mod:`geodata.approximate_geodesic`).
+        fields: ``"heat"`` (the shipped models' up to v2), ``"vsp"`` (0.1-0.3% from exact, ~2 ms a field
+            at 5k vertices: :mod:`geodata.approximate_geodesic`) or ``"exact"`` (the exact solver's, 6-8x a vsp
+            field's time: :func:`_exact_field`).
     """
     return landmark_solver(vertices, faces, k, t_coef, batch, fields)(seed)
 
@@ -109,10 +110,10 @@ def landmark_fields(vertices, faces, k: int, seed: int = 0, t_coef: float = T_CO
 def landmark_solver(vertices, faces, k: int, t_coef: float = T_COEF, batch: int | None = None,
                     fields: str = "heat") -> Callable[[int], LandmarkFields]:
     """``seed -> LandmarkFields``: :func:`landmark_fields` of one mesh for any seed, each component's solver
-    set up once (on the first call) and sampled for every seed. ``fields``: ``"heat"`` (the heat method) or
-    ``"vsp"`` (virtual source propagation, :func:`_vsp_field`)."""
-    if fields not in ("heat", "vsp"):
-        raise ValueError(f"fields must be 'heat' or 'vsp', got {fields!r}")
+    set up once (on the first call) and sampled for every seed. ``fields``: ``"heat"`` (the heat method),
+    ``"vsp"`` (virtual source propagation, :func:`_vsp_field`) or ``"exact"`` (:func:`_exact_field`)."""
+    if fields not in FIELD_SOLVERS:
+        raise ValueError(f"fields must be one of {', '.join(FIELD_SOLVERS)}, got {fields!r}")
     if k < 1:
         raise ValueError(f"k must be >= 1, got {k}")
     mesh = Mesh(vertices, faces)
@@ -140,8 +141,7 @@ def landmark_solver(vertices, faces, k: int, t_coef: float = T_COEF, batch: int 
                 continue
             n_fields = min(k, len(idx))
             if c not in solvers:
-                solvers[c] = (_vsp_field(mesh.vertices[idx], sub_faces, t_coef, n_fields) if fields == "vsp"
-                              else _heat_field(mesh.vertices[idx], sub_faces, t_coef, n_fields))
+                solvers[c] = FIELD_SOLVERS[fields](mesh.vertices[idx], sub_faces, t_coef, n_fields)
             chosen, sampled = batched_farthest_point_fields(solvers[c], mesh.vertices[idx], n_fields,
                                                             int(rng.integers(len(idx))), batch or FPS_BATCH)
             cols = np.arange(k) % len(chosen)  # fewer vertices than K: repeat
@@ -265,6 +265,33 @@ def _along_edges(fields: np.ndarray, vertices: np.ndarray, edges: np.ndarray) ->
     return fields
 
 
+def _exact_field(vertices, faces, t_coef: float, fields: int):
+    """``fields(sources) -> (N, len(sources))``: exact polyhedral geodesics, geodata's window-propagation solver
+    (``vtp``), every value a shortest path's length; 6-8x a vsp field's time (docs/benchmarks.md), one source
+    after another. A part it is not made for (an edge of three or more faces, a pinched vertex) or too large
+    for the memory available gets the vsp fields of :func:`_vsp_field` instead, with a warning saying why."""
+    import warnings
+
+    from geodata._exact_geodesic import Surface
+    from geodata.exact_memory import require_memory
+    from geodata.mesh import MeshError, has_pinched_vertices, edge_face_counts
+
+    _, counts = edge_face_counts(faces)
+    problem = (f"{int((counts > 2).sum())} edges of three or more faces" if (counts > 2).any() else
+               "pinched vertices (two or more fans)" if has_pinched_vertices(faces, len(vertices)) else None)
+    if problem is None:
+        try:
+            require_memory(len(vertices))
+        except MeshError as exc:
+            problem = exc.reason
+    if problem is not None:
+        warnings.warn(f"exact landmark fields on a part of {len(vertices)} vertices: {problem}: virtual-source "
+                      f"fields instead", stacklevel=3)
+        return _vsp_field(vertices, faces, t_coef, fields)
+    surface = Surface(np.ascontiguousarray(vertices, dtype=np.float64), np.ascontiguousarray(faces, dtype=np.int32))
+    return lambda sources: surface.distances(np.asarray(sources, dtype=np.int64)).T
+
+
 def _heat_field(vertices, faces, t_coef: float, fields: int):
     """``fields(sources) -> (N, len(sources))``: potpourri3d's robust heat method, by :class:`gegnn.fields.heat.HeatDistance`
     where that pays (see the module), by potpourri3d itself elsewhere and on meshes that HeatDistance does
@@ -358,3 +385,6 @@ def _finite(field: np.ndarray) -> np.ndarray:
         ok = np.isfinite(field)
         field = np.where(ok, field, field[ok].max() if ok.any() else 0.0)
     return np.maximum(field, 0.0)
+
+
+FIELD_SOLVERS = {"heat": _heat_field, "vsp": _vsp_field, "exact": _exact_field}  # landmark_solver's ``fields``
