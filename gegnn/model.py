@@ -3,8 +3,8 @@ ACM TOG 2023): one forward pass gives an embedding per vertex; a small MLP decod
 to a distance."""
 from __future__ import annotations
 
-from collections.abc import Callable
 import dataclasses
+from collections.abc import Callable
 from contextlib import nullcontext
 
 import numpy as np

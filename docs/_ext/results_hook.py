@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import json
 import re
-import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -78,4 +77,3 @@ def on_page_markdown(markdown: str, page, config, files) -> str:
 if __name__ == "__main__":
     written = write_pages()
     print(f"figures of docs/results.json written into {', '.join(written) if written else 'no page (all current)'}")
-    sys.exit(0)

@@ -274,18 +274,17 @@ def _exact_field(vertices, faces, t_coef: float, fields: int):
 
     from geodata._exact_geodesic import Surface
     from geodata.exact_memory import require_memory
-    from geodata.mesh import MeshError, has_pinched_vertices, edge_face_counts
+    from geodata.mesh import MeshError, has_pinched_vertices
 
-    _, counts = edge_face_counts(faces)
-    problem = (f"{int((counts > 2).sum())} edges of three or more faces" if (counts > 2).any() else
-               "pinched vertices (two or more fans)" if has_pinched_vertices(faces, len(vertices)) else None)
-    if problem is None:
-        try:
-            require_memory(len(vertices))
-        except MeshError as exc:
-            problem = exc.reason
-    if problem is not None:
-        warnings.warn(f"exact landmark fields on a part of {len(vertices)} vertices: {problem}: virtual-source "
+    from .exact import require_edge_manifold
+
+    try:
+        require_edge_manifold(Mesh(vertices, faces))
+        if has_pinched_vertices(faces, len(vertices)):
+            raise MeshError("exact", "pinched vertices (two or more fans)")
+        require_memory(len(vertices))
+    except MeshError as exc:
+        warnings.warn(f"exact landmark fields on a part of {len(vertices)} vertices: {exc.reason}: virtual-source "
                       f"fields instead", stacklevel=3)
         return _vsp_field(vertices, faces, t_coef, fields)
     surface = Surface(np.ascontiguousarray(vertices, dtype=np.float64), np.ascontiguousarray(faces, dtype=np.int32))
