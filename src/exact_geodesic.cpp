@@ -33,6 +33,11 @@
 //      and V's own windows give d(V) + d(V, Y): distances change by 3e-11 relative at most. Without
 //      it, windows that pass a vertex within rounding pile up on its edges by the thousand (on
 //      openDoor.obj, around a needle tip of total angle 0.005 rad they spiral round).
+// With a tolerance t > 0, rules 1-3 prune a window already where a real path is within a factor 1 - t of it
+// (not only where one is shorter), and a vertex whose path pruned a window by rule 1 only thanks to t
+// relays it (rule 4's step), so the paths it stands for go on from there. Every value is still a real
+// path's length (pruning only drops candidates), never below exact; the error is measured, not bounded:
+// benchmarks/bench_field_frontier.py.
 // Half-edges wait in buckets of their earliest window's smallest distance and leave each bucket first
 // in, first out (the fast wavefront of Xu et al. 2015); a half-edge whose windows all crossed is queued
 // again by the next window that reaches it. Since every rule prunes against real paths (rule 4 up to its
@@ -87,8 +92,10 @@ public:
 
     int64_t n_vertices() const { return n_; }
 
-    void distances(int64_t source, double* out) {
+    void distances(int64_t source, double* out, double tolerance = 0.0) {
         if (source < 0 || source >= n_) throw std::invalid_argument("source vertex out of range");
+        if (!(tolerance >= 0.0 && tolerance < 1.0)) throw std::invalid_argument("tolerance must be in [0, 1)");
+        keep_ = tolerance > 0.0 ? 1.0 - tolerance : 1.0 + MARGIN;
         std::fill(d_.begin(), d_.end(), INF);
         std::fill(emitted_.begin(), emitted_.end(), INF);
         emits_ = pseudo_;
@@ -132,6 +139,7 @@ private:
     std::vector<Paths> paths_;
     BucketQueue queue_;
     int source_ = 0;
+    double keep_ = 1.0 + MARGIN;  // a window survives a real path only if shorter than it times this
 
     static int next(int h) { return h % 3 == 2 ? h - 2 : h + 1; }
     static int prev(int h) { return h % 3 == 0 ? h + 2 : h - 1; }
@@ -251,7 +259,7 @@ private:
     // when nothing of w is left; o is emptied (b1 = -inf) when nothing of it is left. Windows that overlap
     // by less than 1% of the longer are left as they are: 60% of the contests, most of which cut nothing
     // (5-15% faster from 5k to 160k vertices, distances unchanged; a cut left out only prunes less).
-    static bool contest(Window& w, Window& o) {
+    bool contest(Window& w, Window& o) const {
         const double lo = std::max(w.b0, o.b0), hi = std::min(w.b1, o.b1);
         if (hi - lo <= 1e-9 * hi || hi - lo < 0.01 * std::max(w.b1 - w.b0, o.b1 - o.b0)) return true;
         double cut[4] = {lo, 0.0, 0.0, 0.0}, roots[2];
@@ -263,8 +271,8 @@ private:
         bool w_worse[3], o_worse[3];
         for (int i = 0; i < k; ++i) {
             const double mid = 0.5 * (cut[i] + cut[i + 1]), dw = at(w, mid), dout = at(o, mid);
-            w_worse[i] = dw > dout * (1.0 + MARGIN);
-            o_worse[i] = dout > dw * (1.0 + MARGIN);
+            w_worse[i] = dw > dout * keep_;
+            o_worse[i] = !w_worse[i] && dout > dw * (1.0 + MARGIN);
         }
         if (!cut_dominated(o, cut, o_worse, k)) o.b1 = -INF;  // dominated
         return cut_dominated(w, cut, w_worse, k);
@@ -272,9 +280,18 @@ private:
 
     // Rule 1: longer at its far end from A than the path through A, or the same for B.
     // to0, to1: the window's distances at b0 and b1.
-    bool useless(const Window& w, double to0, double to1) const {
-        return to1 > (d_[F_[w.h]] + w.b1) * (1.0 + MARGIN) ||
-               to0 > (d_[F_[next(w.h)]] + len_[w.h] - w.b0) * (1.0 + MARGIN);
+    bool useless(const Window& w, double to0, double to1) {
+        const int a = F_[w.h], b = F_[next(w.h)];
+        const double via_a = d_[a] + w.b1, via_b = d_[b] + len_[w.h] - w.b0;
+        if (to1 > via_a * keep_) {
+            if (to1 <= via_a * (1.0 + MARGIN)) relay(a);  // pruned only by the tolerance: a carries its paths on
+            return true;
+        }
+        if (to0 > via_b * keep_) {
+            if (to0 <= via_b * (1.0 + MARGIN)) relay(b);
+            return true;
+        }
+        return false;
     }
 
     // The edge's vertices take the paths through the window's ends (to0, to1: its distances there).
@@ -326,11 +343,10 @@ private:
         head_[h] = -1;
         std::sort(batch_.begin(), batch_.end(), [](const Window& a, const Window& b) { return a.b0 < b.b0; });
         size_t kept = 0;  // batch_[0, kept): the survivors so far, by start
-        const double da = d_[F_[h]] * (1.0 + MARGIN), db = d_[F_[next(h)]] * (1.0 + MARGIN), len = len_[h];
         for (size_t i = 0; i < batch_.size(); ++i) {
             Window w = batch_[i];
             // rule 1 again: the vertices may have improved since it came
-            if (at(w, w.b1) > da + w.b1 * (1.0 + MARGIN) || at(w, w.b0) > db + (len - w.b0) * (1.0 + MARGIN)) continue;
+            if (useless(w, at(w, w.b0), at(w, w.b1))) continue;
             bool alive = true, emptied = false;
             // back from the last survivor; past the last two, stop at the first that ends before w starts
             // (trimming leaves the starts only nearly sorted: a comparison missed only prunes less)
@@ -374,7 +390,7 @@ private:
         const int h = w.h;
         const double L = len_[h], cx = cx_[h], cy = cy_[h], sp = x.sp;
         double left_end = std::min(w.b1, sp), right_start = std::max(w.b0, sp);
-        if (x.planar > best_d_[h] * (1.0 + MARGIN)) {
+        if (x.planar > best_d_[h] * keep_) {
             left_end = std::min(left_end, best_sp_[h]);
             right_start = std::max(right_start, best_sp_[h]);
         }
@@ -408,16 +424,18 @@ NB_MODULE(_exact_geodesic, m) {
             "Precompute a mesh: vertices (N, 3) float64 and faces (M, 3) int32, both C-contiguous.")
         .def(
             "distances",
-            [](Surface& self, Sources sources) {
+            [](Surface& self, Sources sources, double tolerance) {
                 const size_t k = sources.shape(0), n = static_cast<size_t>(self.n_vertices());
                 double* out = new double[k * n];
                 nb::capsule owner(out, [](void* p) noexcept { delete[] static_cast<double*>(p); });
                 {
                     nb::gil_scoped_release release;
-                    for (size_t i = 0; i < k; ++i) self.distances(sources.data()[i], out + i * n);
+                    for (size_t i = 0; i < k; ++i) self.distances(sources.data()[i], out + i * n, tolerance);
                 }
                 return nb::ndarray<nb::numpy, double, nb::ndim<2>>(out, {k, n}, owner);
             },
-            nb::arg("sources"),
-            "Distances (len(sources), N) float64 from each source vertex to every vertex; inf where unreached.");
+            nb::arg("sources"), nb::arg("tolerance") = 0.0,
+            "Distances (len(sources), N) float64 from each source vertex to every vertex; inf where unreached. "
+            "tolerance > 0 prunes windows within that relative factor of a real path: faster, every value still a "
+            "real path's length (src/exact_geodesic.cpp).");
 }
