@@ -10,26 +10,21 @@ field, the least thread CPU time of two calls of 10 sources each, one thread.
 """
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
-import trimesh
 
+from bench_field_solver import load as load_real  # benchmarks/ is on sys.path when a script there runs
 from geodata._exact_geodesic import Surface
 from geodata.approximate_geodesic import ApproximateGeodesicSolver
 from geodata.zoo import zoo_mesh
 
-ROOT = Path(__file__).resolve().parents[1]
-CLASSIC = {"max": "dev/libigl-tutorial-data/decimated-max.obj", "homer": "dev/common-3d-test-models/homer.obj"}
+CLASSIC = ["max", "homer"]
 SHAPES = ["torus-r0.3", "u-bend", "genus-3-plate", "t-pipe", "slivers", "noisy"]
 TOLERANCES = (1e-4, 1e-3, 1e-2)
 
 
 def load(name):
-    if name in CLASSIC:
-        mesh = trimesh.load(ROOT.parent / "shared" / "meshes" / CLASSIC[name], process=False)
-        return np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int32)
-    v, f = zoo_mesh(name)
+    v, f = load_real(name) if name in CLASSIC else zoo_mesh(name)
     return np.asarray(v, dtype=np.float64), np.asarray(f, dtype=np.int32)
 
 

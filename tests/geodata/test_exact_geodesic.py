@@ -224,7 +224,7 @@ def test_every_prepared_train_mesh_equals_libigl(path):
 
 def needle_l_shape(seed: int = 0) -> Mesh:
     """[0,1]^2 without (0.5,1)^2, a Delaunay triangulation of random points and its boundary's, with one point
-    a thousandth of an edge inside the cut's edge x = 0.5: a needle face on the boundary beside the hole."""
+    1/750 of a boundary edge inside the cut's edge x = 0.5: a needle face on the boundary beside the hole."""
     from scipy.spatial import Delaunay
 
     rng = np.random.default_rng(seed)
