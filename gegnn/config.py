@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 __all__ = ["GeGnnConfig", "LANDMARK_FIELDS"]
 
-LANDMARK_FIELDS = ("heat", "vsp", "exact")  # the landmark fields' solvers (gegnn.fields.landmarks)
+LANDMARK_FIELDS = ("heat", "vsp", "exact", "paths")  # the landmark fields' solvers (gegnn.fields.landmarks)
 
 
 @dataclass(frozen=True)
@@ -40,7 +40,8 @@ class GeGnnConfig:
     landmark_euclidean: bool = True           # ... and the straight-line distance
     landmark_output: str = "ratio"            # "ratio": d = L exp(MLP); "interval": d = L + (U - L) sigmoid(MLP)
     landmark_fields: str = "heat"             # their solver: "heat" (the heat method, ~1.9% off: models up to v2),
-                                              # "vsp" (virtual source propagation, 0.1-0.3% off) or "exact"
+                                              # "vsp" (virtual source propagation, 0.1-0.3% off), "exact"
+                                              # or "paths" (real paths within 0.05% of exact)
     # Biharmonic distances (0 = none): m truncated spectral modes per component and their Weyl-law tail,
     # corrected by a SpectralDecoder that reads the embeddings (gegnn.fields.spectral).
     spectral: int = 0
@@ -63,8 +64,9 @@ class GeGnnConfig:
             raise ValueError(f"landmark_output must be 'ratio' or 'interval', got {self.landmark_output!r}")
         if self.landmark_fields not in LANDMARK_FIELDS:
             raise ValueError(f"landmark_fields must be one of {', '.join(LANDMARK_FIELDS)}, got {self.landmark_fields!r}")
-        if self.points and self.landmark_fields == "exact":
-            raise ValueError("exact landmark fields need a mesh; a point-cloud model reads heat or vsp fields")
+        if self.points and self.landmark_fields in ("exact", "paths"):
+            raise ValueError(f"{self.landmark_fields} landmark fields need a mesh; a point-cloud model reads heat or "
+                             f"vsp fields")
         if self.landmarks < 0 or self.spectral < 0:
             raise ValueError(f"landmarks and spectral must be >= 0, got {self.landmarks} and {self.spectral}")
         if self.distance not in ("geodesic", "biharmonic"):

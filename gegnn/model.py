@@ -148,7 +148,8 @@ class GeGnn(nn.Module):
         and a cloud's row-wise steps are spread over the threads (:mod:`gegnn.threads`); the result is the
         same to the bit. ``fields``: a landmark model's fields by another solver than the one it was trained
         on (its config's ``landmark_fields``; None: those), e.g. ``"exact"``, the exact solver's: the ceiling of
-        the fields, at 6-8x a vsp field's time (docs/queries.md).
+        the fields, at 3-10x a vsp field's time, or ``"paths"``, real paths within 0.05% of exact: the default
+        model as close to the truth as with exact fields, at 2-3x its own embed's time (docs/queries.md).
 
         Returns:
             :class:`gegnn.queries.embedding.Embedding`
@@ -180,7 +181,7 @@ class GeGnn(nn.Module):
         """One forward pass with the network in ``precision`` ("fp32" or "bf16"); the embedding's decoder
         gets the ``requested`` precision to resolve; ``fields``: :meth:`embed`'s."""
         if fields is not None and (fields not in LANDMARK_FIELDS or not self.config.landmarks or self.config.points
-                                   or (fields == "exact" and faces is None)):
+                                   or (fields in ("exact", "paths") and faces is None)):
             raise ValueError(f"fields={fields!r}: a mesh landmark model reads fields by one of "
                              f"{', '.join(LANDMARK_FIELDS)}; this model has {self.config.landmarks} landmarks"
                              f"{' on point clouds' if self.config.points else ''}")

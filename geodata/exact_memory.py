@@ -6,7 +6,7 @@ from __future__ import annotations
 from geodata.mesh import MeshError
 
 __all__ = ["exact_memory_estimate", "available_memory", "require_memory", "MEMORY_BASE", "MEMORY_SCALE",
-           "MEMORY_POWER", "MEMORY_MARGIN"]
+           "MEMORY_POWER", "MEMORY_MARGIN", "THREAD_SCALE"]
 
 # The vtp solver keeps the mesh's half-edge tables (~430 bytes a vertex) and only the wavefront of a source
 # (the windows waiting to cross a face, in chunks that the next ones reuse: ~50 MiB at 1M vertices).
@@ -16,6 +16,9 @@ __all__ = ["exact_memory_estimate", "available_memory", "require_memory", "MEMOR
 # bench_exact_scaling.py, docs/benchmarks.md); MEMORY_MARGIN over it for meshes whose wavefront is
 # longer. (Keeping every window instead costs ~40 N^1.5 bytes, 47 GiB at 1M.)
 MEMORY_BASE, MEMORY_SCALE, MEMORY_POWER, MEMORY_MARGIN = 8 << 20, 500.0, 1.0, 1.25
+# Each further thread keeps its own wavefront and distances: 200-205 bytes a vertex more each (peak resident
+# memory of 1, 2 and 4 sources at once on an icosphere of 164k vertices, the output rows aside).
+THREAD_SCALE = 210.0
 
 
 def exact_memory_estimate(n_vertices: int) -> int:
@@ -41,9 +44,13 @@ def available_memory() -> int:
     return min(limits) if limits else 1 << 62
 
 
-def require_memory(n_vertices: int) -> None:
-    """MeshError("geodesic", ...) before a solve whose estimate exceeds the memory available."""
+def require_memory(n_vertices: int, threads: int = 1) -> int:
+    """MeshError("geodesic", ...) before a solve whose estimate exceeds the memory available; else how many of
+    ``threads`` may solve at once, each with its own wavefront (THREAD_SCALE bytes a vertex, MEMORY_MARGIN over
+    it), in what is left (at least 1)."""
     need, have = exact_memory_estimate(n_vertices), available_memory()
     if need > have:
         raise MeshError("geodesic", f"the exact solver would need ~{need / 2 ** 30:.1f} GiB for one source on "
                                     f"{n_vertices} vertices; {have / 2 ** 30:.1f} GiB available")
+    per_thread = MEMORY_MARGIN * THREAD_SCALE * max(n_vertices, 1)
+    return int(max(1, min(threads, 1 + (have - need) // per_thread)))

@@ -47,6 +47,7 @@
 #include <nanobind/ndarray.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstdint>
 #include <cstdlib>
@@ -58,6 +59,7 @@
 #include <vector>
 
 #include "exact_windows.h"
+#include "threads.h"
 #include "vertex_corners.h"
 
 namespace nb = nanobind;
@@ -71,6 +73,7 @@ constexpr double MARGIN = 1e-12;      // relative: prune only what is worse than
 constexpr double HAIR = 1e-11;   // relative to a window's distance: closer to a vertex, it relays (rule 4)
 constexpr double BUCKET = 0.05;  // bucket width / mean edge length (0.02-0.3: within 5% at 160k vertices)
 
+// The mesh, read-only once built: the half-edge tables every source's propagation reads.
 class Surface {
 public:
     Surface(const double* V, int64_t n, const int32_t* F, int64_t m) : n_(n), m_(m), F_(F, F + 3 * m) {
@@ -79,68 +82,22 @@ public:
         build_twins();
         build_frames(V);
         vertex_corners(F_, n_, vf_start_, vf_);
-        d_.resize(n);
-        emitted_.resize(n);
         double total = 0.0;
         for (double l : len_) total += l;
         width_ = BUCKET * total / std::max<size_t>(len_.size(), 1);
-        best_d_.resize(3 * m);
-        best_sp_.resize(3 * m);
-        head_.resize(3 * m);
-        due_.resize(3 * m);
     }
 
     int64_t n_vertices() const { return n_; }
 
-    void distances(int64_t source, double* out, double tolerance = 0.0) {
-        if (source < 0 || source >= n_) throw std::invalid_argument("source vertex out of range");
-        if (!(tolerance >= 0.0 && tolerance < 1.0)) throw std::invalid_argument("tolerance must be in [0, 1)");
-        keep_ = tolerance > 0.0 ? 1.0 - tolerance : 1.0 + MARGIN;
-        std::fill(d_.begin(), d_.end(), INF);
-        std::fill(emitted_.begin(), emitted_.end(), INF);
-        emits_ = pseudo_;
-        emits_[source] = 1;
-        std::fill(best_d_.begin(), best_d_.end(), INF);
-        std::fill(head_.begin(), head_.end(), -1);
-        std::fill(due_.begin(), due_.end(), -1);
-        chunks_.clear();
-        queue_.reset(width_);
-        source_ = static_cast<int>(source);
-        improve(source_, 0.0);
-        size_t b;
-        for (int id; queue_.pop(id, b);) {
-            if (id < 0)
-                settle(-id - 1);
-            else if (due_[id] == static_cast<int64_t>(b))
-                sweep(id);
-        }
-        std::copy(d_.begin(), d_.end(), out);
-    }
-
-private:
     int64_t n_, m_;
     std::vector<int32_t> F_;
     std::vector<int> twin_;             // per half-edge h = 3 f + k (F[h] -> F[next(h)]): its twin or -1
     std::vector<double> len_, cx_, cy_;  // per half-edge: length, opposite vertex in its frame (cy >= 0)
     std::vector<char> pseudo_;          // per vertex: saddle (angle sum > 2 pi) or on the boundary
-    std::vector<char> emits_;           // per vertex and source: lights its edges (pseudo, source or relay)
     std::vector<int> vf_start_, vf_;    // faces around each vertex (CSR), as half-edges leaving it
-    // per source
-    std::vector<double> d_, best_d_, best_sp_;
-    std::vector<double> emitted_;  // per vertex: the distance at which it last lit its edges
-    double width_ = 1.0;
-    ChunkStore chunks_;
-    std::vector<int> head_;      // per half-edge: the windows waiting on it (-1: none)
-    std::vector<int64_t> due_;  // per half-edge: the bucket it is queued in (-1: none; older entries are stale)
-    std::vector<Window> batch_;  // the windows of the half-edge that sweeps
-    struct Paths {
-        double to0, to1, sp, planar;  // distances at b0 and b1; where the path to C crosses, its length
-    };
-    std::vector<Paths> paths_;
-    BucketQueue queue_;
-    int source_ = 0;
-    double keep_ = 1.0 + MARGIN;  // a window survives a real path only if shorter than it times this
+    double width_ = 1.0;                // bucket width
 
+private:
     static int next(int h) { return h % 3 == 2 ? h - 2 : h + 1; }
     static int prev(int h) { return h % 3 == 0 ? h + 2 : h - 1; }
 
@@ -187,6 +144,72 @@ private:
         for (int64_t v = 0; v < n_; ++v)
             if (angle_sum[v] > 2.0 * M_PI * (1.0 + 1e-9)) pseudo_[v] = 1;  // a geodesic passes a flat vertex straight
     }
+};
+
+// One source's propagation on a Surface: the wavefront and the distances, reused source after source (one a
+// thread: sources are independent, so the fields do not depend on how many threads share them).
+class Front {
+public:
+    explicit Front(const Surface& s)
+        : n_(s.n_), F_(s.F_), twin_(s.twin_), len_(s.len_), cx_(s.cx_), cy_(s.cy_), pseudo_(s.pseudo_),
+          vf_start_(s.vf_start_), vf_(s.vf_), width_(s.width_) {
+        d_.resize(n_);
+        emitted_.resize(n_);
+        best_d_.resize(3 * s.m_);
+        best_sp_.resize(3 * s.m_);
+        head_.resize(3 * s.m_);
+        due_.resize(3 * s.m_);
+    }
+
+    void distances(int64_t source, double* out, double tolerance) {
+        keep_ = tolerance > 0.0 ? 1.0 - tolerance : 1.0 + MARGIN;
+        std::fill(d_.begin(), d_.end(), INF);
+        std::fill(emitted_.begin(), emitted_.end(), INF);
+        emits_ = pseudo_;
+        emits_[source] = 1;
+        std::fill(best_d_.begin(), best_d_.end(), INF);
+        std::fill(head_.begin(), head_.end(), -1);
+        std::fill(due_.begin(), due_.end(), -1);
+        chunks_.clear();
+        queue_.reset(width_);
+        source_ = static_cast<int>(source);
+        improve(source_, 0.0);
+        size_t b;
+        for (int id; queue_.pop(id, b);) {
+            if (id < 0)
+                settle(-id - 1);
+            else if (due_[id] == static_cast<int64_t>(b))
+                sweep(id);
+        }
+        std::copy(d_.begin(), d_.end(), out);
+    }
+
+private:
+    const int64_t n_;
+    const std::vector<int32_t>& F_;
+    const std::vector<int>& twin_;
+    const std::vector<double>&len_, &cx_, &cy_;
+    const std::vector<char>& pseudo_;
+    const std::vector<int>&vf_start_, &vf_;
+    const double width_;
+    // per source
+    std::vector<char> emits_;  // per vertex: lights its edges (pseudo-source, source or relay)
+    std::vector<double> d_, best_d_, best_sp_;
+    std::vector<double> emitted_;  // per vertex: the distance at which it last lit its edges
+    ChunkStore chunks_;
+    std::vector<int> head_;      // per half-edge: the windows waiting on it (-1: none)
+    std::vector<int64_t> due_;  // per half-edge: the bucket it is queued in (-1: none; older entries are stale)
+    std::vector<Window> batch_;  // the windows of the half-edge that sweeps
+    struct Paths {
+        double to0, to1, sp, planar;  // distances at b0 and b1; where the path to C crosses, its length
+    };
+    std::vector<Paths> paths_;
+    BucketQueue queue_;
+    int source_ = 0;
+    double keep_ = 1.0 + MARGIN;  // a window survives a real path only if shorter than it times this
+
+    static int next(int h) { return h % 3 == 2 ? h - 2 : h + 1; }
+    static int prev(int h) { return h % 3 == 0 ? h + 2 : h - 1; }
 
     // A vertex that lights its edges from now on, for this source, like a pseudo-source (rule 4).
     void relay(int v) {
@@ -424,18 +447,28 @@ NB_MODULE(_exact_geodesic, m) {
             "Precompute a mesh: vertices (N, 3) float64 and faces (M, 3) int32, both C-contiguous.")
         .def(
             "distances",
-            [](Surface& self, Sources sources, double tolerance) {
+            [](const Surface& self, Sources sources, double tolerance, int64_t threads) {
                 const size_t k = sources.shape(0), n = static_cast<size_t>(self.n_vertices());
-                double* out = new double[k * n];
+                const int64_t* src = sources.data();
+                for (size_t i = 0; i < k; ++i)
+                    if (src[i] < 0 || src[i] >= self.n_vertices()) throw std::invalid_argument("source vertex out of range");
+                if (!(tolerance >= 0.0 && tolerance < 1.0)) throw std::invalid_argument("tolerance must be in [0, 1)");
+                double* out = new double[std::max<size_t>(k * n, 1)];
                 nb::capsule owner(out, [](void* p) noexcept { delete[] static_cast<double*>(p); });
                 {
                     nb::gil_scoped_release release;
-                    for (size_t i = 0; i < k; ++i) self.distances(sources.data()[i], out + i * n, tolerance);
+                    std::atomic<size_t> next{0};
+                    const int64_t team = std::max<int64_t>(1, std::min<int64_t>(threads, static_cast<int64_t>(k)));
+                    run_parts(team, [&](int64_t) {  // each thread takes sources until none is left
+                        Front front(self);
+                        for (size_t i; (i = next++) < k;) front.distances(src[i], out + i * n, tolerance);
+                    });
                 }
                 return nb::ndarray<nb::numpy, double, nb::ndim<2>>(out, {k, n}, owner);
             },
-            nb::arg("sources"), nb::arg("tolerance") = 0.0,
+            nb::arg("sources"), nb::arg("tolerance") = 0.0, nb::arg("threads") = 1,
             "Distances (len(sources), N) float64 from each source vertex to every vertex; inf where unreached. "
             "tolerance > 0 prunes windows within that relative factor of a real path: faster, every value still a "
-            "real path's length (src/exact_geodesic.cpp).");
+            "real path's length (src/exact_geodesic.cpp). threads: sources solved at once, each thread with its own "
+            "wavefront (the result does not depend on it).");
 }

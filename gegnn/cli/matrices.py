@@ -7,7 +7,7 @@ import click
 
 from .inputs import (_click_errors, _embed_cloud, _load_cloud, _load_mesh, _load_model, _model_and_meshes,
                      _model_config)
-from .options import DEVICE_OPTION, MODEL_ARG, PRECISION_OPTION, PRETRAINED_HELP
+from .options import DEVICE_OPTION, FIELDS_OPTION, MODEL_ARG, PRECISION_OPTION, PRETRAINED_HELP, check_fields
 
 
 @click.command(context_settings={"max_content_width": 100})
@@ -27,9 +27,11 @@ from .options import DEVICE_OPTION, MODEL_ARG, PRECISION_OPTION, PRETRAINED_HELP
 @click.option("--jobs", default=0, show_default=True, help="Threads of --exact (0: every core).")
 @click.option("--prepare", is_flag=True, help="Run the geodata pipeline first (watertight, remesh to ~5k "
                                               "vertices); rows and columns stay the file's vertices.")
+@FIELDS_OPTION
 @DEVICE_OPTION
 @PRECISION_OPTION
-def pairwise(files, pretrained, output, rows_file, dtype, exact, heat, jobs, prepare, device, precision):
+def pairwise(files, pretrained, output, rows_file, dtype, exact, heat, jobs, prepare, landmark_fields, device,
+             precision):
     """The whole distance matrix of MESH: every vertex (or --rows) to every vertex, predicted by
     CHECKPOINT or --pretrained, or for comparison computed by the exact solver (--exact) or the heat
     method (--heat). With a point-cloud model (--pretrained points), of a cloud's points.
@@ -39,6 +41,7 @@ def pairwise(files, pretrained, output, rows_file, dtype, exact, heat, jobs, pre
       gegnn pairwise --pretrained bunny.obj -o D.npy
       gegnn pairwise --pretrained bunny.obj -o D.zarr --dtype float16
       gegnn pairwise --pretrained bunny.obj --rows sources.txt -o D.npy
+      gegnn pairwise --pretrained bunny.obj --fields paths -o D.npy
       gegnn pairwise --pretrained bunny.obj --exact -o E.npy
       gegnn pairwise --pretrained points scan.xyz -o D.npy
 
@@ -61,6 +64,9 @@ def pairwise(files, pretrained, output, rows_file, dtype, exact, heat, jobs, pre
         raise click.BadParameter("expected a .npy or .zarr path", param_hint="-o")
     name = Path(mesh_path).name
     config = _model_config(model_spec, pretrained)
+    check_fields(config, landmark_fields)
+    if landmark_fields and (exact or heat):
+        raise click.UsageError("--fields goes with the model's matrix (not --exact or --heat)")
     if config.points:
         if exact or heat or prepare:
             raise click.UsageError("a point-cloud model answers its own matrix: --exact, --heat and --prepare take a "
@@ -86,7 +92,7 @@ def pairwise(files, pretrained, output, rows_file, dtype, exact, heat, jobs, pre
         else:
             what = f"predicted {kind}"
             emb = _load_model(model_spec, pretrained, device).embed(qm.mesh.vertices, qm.mesh.faces,
-                                                                    precision=precision)
+                                                                    precision=precision, fields=landmark_fields)
             # float32 tiles: the file converts them to --dtype and checks the range, once for every source
             emb.matrix(matrix.mesh_rows, None if rows_file is None else matrix.mesh_cols, out=matrix,
                        progress=True)

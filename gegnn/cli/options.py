@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import click
 
+from ..config import LANDMARK_FIELDS
 from ..model import PRETRAINED
 from ..pictures.render import UP_AXES
 
@@ -18,9 +19,23 @@ PRECISION_OPTION = click.option(
     help="Network and decoder precision. bf16: 1.6x faster (measured) where the hardware has native bf16 "
          "(AVX512-BF16 or AMX CPUs, CUDA GPUs from compute capability 8.0), slower where it is emulated, "
          "distances within ~1%. auto: bf16 only where it is native.")
+FIELDS_OPTION = click.option(
+    "--fields", "landmark_fields", type=click.Choice(["own", *LANDMARK_FIELDS]), default="own", show_default=True,
+    callback=lambda ctx, param, value: None if value == "own" else value,
+    help="A landmark model's fields by another solver than the one it was trained on (own). paths: real "
+         "surface paths within 0.05% of exact; the default model answers about twice closer to the truth "
+         "(0.08-0.16% against 0.22-0.34% on the zoo), its embed 2-3x slower. exact: the exact solver's, the same "
+         "error at 3-12x the embed. Meshes only; docs/queries.md has the table.")
 SIZE_OPTION = click.option("--size", default=480, show_default=True, help="Pixels across a rendered mesh (PNG).")
 PRETRAINED_HELP = ("Use a model shipped in the package instead of CHECKPOINT: the most accurate one, or NAME "
                    f"({', '.join(repr(name) for name in PRETRAINED)}).")
+
+
+def check_fields(config, fields) -> None:
+    """UsageError where --fields asks a model for landmark fields it does not read (no landmarks, or a cloud's)."""
+    if fields is not None and (not config.landmarks or config.points):
+        what = "a point-cloud model" if config.points else "a model without landmarks"
+        raise click.UsageError(f"--fields {fields}: {what} reads no mesh landmark fields")
 
 
 def old_name(old: str, new: str, dest: str, **kwargs):

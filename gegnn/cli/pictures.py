@@ -10,7 +10,8 @@ from ..model import PRETRAINED
 from ..pictures.display import DISPLAY_VERTICES
 from .inputs import (_click_errors, _embed_cloud, _load_cloud, _load_mesh, _load_model, _model_and_meshes,
                      _model_config, _output_suffix)
-from .options import DEVICE_OPTION, MODEL_ARG, PRECISION_OPTION, PREPARE_OPTION, PRETRAINED_HELP, SIZE_OPTION, UP_OPTION
+from .options import (DEVICE_OPTION, FIELDS_OPTION, MODEL_ARG, PRECISION_OPTION, PREPARE_OPTION, PRETRAINED_HELP,
+                      SIZE_OPTION, UP_OPTION, check_fields)
 
 
 @click.command(context_settings={"max_content_width": 100})
@@ -31,11 +32,12 @@ from .options import DEVICE_OPTION, MODEL_ARG, PRECISION_OPTION, PREPARE_OPTION,
               help="A mesh with more vertices is drawn decimated to this many, a cloud with more points as a "
                    "random sample of this many (0: never).")
 @PREPARE_OPTION
+@FIELDS_OPTION
 @DEVICE_OPTION
 @PRECISION_OPTION
 @UP_OPTION
-def view(files, pretrained, output, sources, exact, cloud_mesh, dtype, display_vertices, prepare, device, precision,
-         up):
+def view(files, pretrained, output, sources, exact, cloud_mesh, dtype, display_vertices, prepare, landmark_fields,
+         device, precision, up):
     """An interactive page of MESH, or of a point cloud with a point-cloud model: coloured by the distance
     field of a vertex (a point), with isolines; click any vertex and the page decodes its field at once
     from the codes of one forward pass, with the model's own decoder (no server, no network: one
@@ -45,6 +47,7 @@ def view(files, pretrained, output, sources, exact, cloud_mesh, dtype, display_v
     Examples:
       gegnn view --pretrained bunny.obj -o bunny.html
       gegnn view --pretrained bunny.obj --source 0 --source 1234 --exact -o compare.html
+      gegnn view --pretrained bunny.obj --fields paths --source 0 --exact -o paths.html
       gegnn view --pretrained biharmonic bunny.obj -o biharmonic.html
       gegnn view runs/a/best.safetensors part.obj --dtype float16 -o part.html
       gegnn view --pretrained points scan.xyz -o scan.html
@@ -66,6 +69,7 @@ def view(files, pretrained, output, sources, exact, cloud_mesh, dtype, display_v
     spec, (mesh_path,) = _model_and_meshes(files, pretrained)
     _output_suffix(output, (".html", ".htm"))
     config = _model_config(spec, pretrained)
+    check_fields(config, landmark_fields)
     sources = sources or (0,)
     if config.points:
         if prepare:
@@ -82,7 +86,8 @@ def view(files, pretrained, output, sources, exact, cloud_mesh, dtype, display_v
         from ..fields.exact import exact_fields
         with _click_errors(f"{mesh_path}: --exact"):
             fields = dict(zip(net_sources, exact_fields(qm.mesh, np.array(net_sources), config.distance)))
-    emb = _load_model(spec, pretrained, device).embed(qm.mesh.vertices, qm.mesh.faces, precision=precision)
+    emb = _load_model(spec, pretrained, device).embed(qm.mesh.vertices, qm.mesh.faces, precision=precision,
+                                                      fields=landmark_fields)
     file_index = None
     if not prepare:  # the smallest file vertex of each mesh vertex
         used = np.flatnonzero(qm.to_mesh >= 0)[::-1]
@@ -92,7 +97,8 @@ def view(files, pretrained, output, sources, exact, cloud_mesh, dtype, display_v
     model = f"--pretrained {spec or next(iter(PRETRAINED))}" if pretrained else Path(spec).name
     page = view_page(emb, title=f"{name}: {config.distance} distance predicted by GeGnn",
                      meta=f"{len(qm.mesh.vertices):,} vertices, {len(qm.mesh.faces):,} faces"
-                          + (" (remeshed by --prepare)" if prepare else "") + f"; model {model}; distances in the "
+                          + (" (remeshed by --prepare)" if prepare else "") + f"; model {model}"
+                          + (f", landmark fields by {landmark_fields}" if landmark_fields else "") + "; distances in the "
                           "mesh's units", sources=net_sources, exact=fields, file_index=file_index, up=up, dtype=dtype,
                      display_vertices=display_vertices)
     Path(output).write_text(page, encoding="utf-8")

@@ -7,8 +7,8 @@ import click
 
 from .inputs import (_click_errors, _embed_cloud, _load_cloud, _load_mesh, _load_model, _model_and_meshes,
                      _model_config, _output_suffix)
-from .options import (DEVICE_OPTION, MODEL_ARG, PRECISION_OPTION, PREPARE_OPTION, PRETRAINED_HELP, SIZE_OPTION,
-                      UP_OPTION, either, old_name)
+from .options import (DEVICE_OPTION, FIELDS_OPTION, MODEL_ARG, PRECISION_OPTION, PREPARE_OPTION, PRETRAINED_HELP,
+                      SIZE_OPTION, UP_OPTION, check_fields, either, old_name)
 
 
 @click.command(context_settings={"max_content_width": 100})
@@ -36,12 +36,13 @@ from .options import (DEVICE_OPTION, MODEL_ARG, PRECISION_OPTION, PREPARE_OPTION
               help="Trace the geodesic path from --source to vertex J on the predicted field (a PNG draws "
                    "it); with --exact also potpourri3d's exact edge-flip path, and the lengths of both.")
 @PREPARE_OPTION
+@FIELDS_OPTION
 @DEVICE_OPTION
 @PRECISION_OPTION
 @UP_OPTION
 @SIZE_OPTION
 def query(files, pretrained, source, pairs_csv, points_file, old_pairs, old_points, output, exact, cloud_mesh, path_to,
-          prepare, device, precision, up, size):
+          prepare, landmark_fields, device, precision, up, size):
     """Distances on MESH (OBJ/OFF/PLY/STL/GLB, any units) predicted by CHECKPOINT or --pretrained: geodesic,
     or biharmonic with a biharmonic model (--pretrained biharmonic).
 
@@ -49,6 +50,7 @@ def query(files, pretrained, source, pairs_csv, points_file, old_pairs, old_poin
     Examples:
       gegnn query --pretrained bunny.obj --source 0 -o field.png
       gegnn query --pretrained bunny.obj --source 0 --exact -o compare.png
+      gegnn query --pretrained bunny.obj --source 0 --fields paths --exact -o compare.png
       gegnn query --pretrained bunny.obj --source 0 --path 1234 --exact -o path.png
       gegnn query --pretrained paper bunny.obj --source 0 --exact -o compare.png
       gegnn query --pretrained biharmonic bunny.obj --source 0 --exact -o compare.png
@@ -70,6 +72,7 @@ def query(files, pretrained, source, pairs_csv, points_file, old_pairs, old_poin
     points_file = either(points_file, old_points, "--points-file", "--points")
     model_spec, (mesh_path,) = _model_and_meshes(files, pretrained)
     config = _model_config(model_spec, pretrained)
+    check_fields(config, landmark_fields)
     if config.points:
         if (source is None) == (pairs_csv is None) or points_file or path_to is not None or prepare:
             raise click.UsageError("a point-cloud model answers --source I (with --exact --mesh MESH to compare) "
@@ -92,7 +95,7 @@ def query(files, pretrained, source, pairs_csv, points_file, old_pairs, old_poin
                             precision, up, size)
     if points_file:
         return _query_points(model_spec, pretrained, mesh_path, points_file, output, suffix, exact, prepare, device,
-                             precision)
+                             precision, landmark_fields)
     qm = _load_mesh(mesh_path, prepare)
     with _click_errors(mesh_path):
         pairs = read_pairs(pairs_csv) if pairs_csv else np.array([[source, source if path_to is None else path_to]])
@@ -105,7 +108,8 @@ def query(files, pretrained, source, pairs_csv, points_file, old_pairs, old_poin
         with _click_errors(f"{mesh_path}: --exact"):
             exact_d = exact_field(qm.mesh, src, kind)
 
-    emb = _load_model(model_spec, pretrained, device).embed(qm.mesh.vertices, qm.mesh.faces, precision=precision)
+    emb = _load_model(model_spec, pretrained, device).embed(qm.mesh.vertices, qm.mesh.faces, precision=precision,
+                                                            fields=landmark_fields)
     if pairs_csv:
         return _write_pairs(pairs, emb.distance(net_pairs[:, 0], net_pairs[:, 1]), output)
 
@@ -119,7 +123,8 @@ def query(files, pretrained, source, pairs_csv, points_file, old_pairs, old_poin
     on, n_parts = source_part(qm.mesh, src)
     # Other parts than the source's have no distance from it: NaN (grey in pictures).
     field = np.where(on, emb.field(src), np.nan)
-    click.echo(f"{name}: {len(qm.mesh.vertices)} vertices; {kind} distance from {source}: "
+    by = f" (landmark fields by {landmark_fields})" if landmark_fields else ""
+    click.echo(f"{name}: {len(qm.mesh.vertices)} vertices; {kind} distance from {source}{by}: "
                f"min {np.nanmin(field):.4g} max {np.nanmax(field):.4g}")
     if n_parts > 1:
         click.echo(f"{name}: {n_parts} separate parts; source {source} is on a part of {int(on.sum())} vertices; "
@@ -140,7 +145,7 @@ def query(files, pretrained, source, pairs_csv, points_file, old_pairs, old_poin
 
 
 def _query_points(model_spec, pretrained, mesh_path, points_file, output, suffix, exact, prepare, device,
-                  precision):
+                  precision, landmark_fields):
     """``gegnn query --points-file``: the (P, P) matrix between surface points, optionally against exact distances
     between the same points inserted as vertices."""
     import numpy as np
@@ -163,7 +168,8 @@ def _query_points(model_spec, pretrained, mesh_path, points_file, output, suffix
         refined, vertex = insert_points(qm.mesh, located.face, located.bary)
         with _click_errors(f"{name}: --exact"):
             exact_d = exact_fields(refined, vertex, kind)[:, vertex]
-    emb = _load_model(model_spec, pretrained, device).embed(qm.mesh.vertices, qm.mesh.faces, precision=precision)
+    emb = _load_model(model_spec, pretrained, device).embed(qm.mesh.vertices, qm.mesh.faces, precision=precision,
+                                                            fields=landmark_fields)
     d = emb.surface_distance(located.face[:, None], located.bary[:, None], located.face[None], located.bary[None])
     if exact_d is not None:
         errors = np.concatenate([relative_errors(d[p], exact_d[p], qm.scale, p) for p in range(len(d))])

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import click
 
-from ..config import GeGnnConfig
+from ..config import LANDMARK_FIELDS, GeGnnConfig
 from ..model import PRETRAINED
 from ..training.presets import PRESETS, preset
 from .inputs import _click_errors, _load_mesh, _load_model, _model_and_meshes, _output_suffix
@@ -116,12 +116,12 @@ def _blocks(ctx, param, value):
                    "bound the decoder (0: the paper's model). With --init from a paper model, its network "
                    "is kept and the landmark decoder starts fresh; from a landmark model with another K, "
                    "its decoder is kept too (its weights do not depend on K).")
-@click.option("--landmark-fields", type=click.Choice(["heat", "vsp", "exact"]), default="heat", show_default=True,
+@click.option("--landmark-fields", type=click.Choice(LANDMARK_FIELDS), default="heat", show_default=True,
               help="The landmark fields' solver: the heat method (~1.9% from exact; the shipped landmark models "
                    "up to v2), virtual source propagation (vsp: 0.1-0.3% from exact, ~2 ms a field at 5k "
-                   "vertices; a point-cloud model's on its points' local triangles) or the exact solver (exact, "
-                   "meshes only: 6-8x a vsp field's time). A model reads the fields it "
-                   "was trained with.")
+                   "vertices; a point-cloud model's on its points' local triangles), the exact solver (exact, "
+                   "meshes only: 3-10x a vsp field's time) or real paths within 0.05% of exact (paths, meshes "
+                   "only: 2-4x a vsp field's time). A model reads the fields it was trained with.")
 @click.option("--landmark-no-embedding", is_flag=True, help="Ablation: the decoder reads landmarks only.")
 @click.option("--landmark-no-euclidean", is_flag=True, help="Ablation: drop the straight-line distance input.")
 @click.option("--spectral", default=0, show_default=True, metavar="M",

@@ -64,6 +64,7 @@ FIELD_VERSIONS = {
                       # saddle vertex, fast-marching updates after the propagation, no value below the chord;
                       # 3 (after 0.3.3): vertices at one place (an edge of zero length) take the point's excess
     "exact": 1,       # ... by the exact solver (gegnn.fields.landmarks._exact_field)
+    "paths": 1,       # ... by its windows pruned within a tolerance (gegnn.fields.landmarks._paths_field)
     "cloud-heat": 2,  # a point cloud's by the heat method (gegnn.fields.cloud_heat); 2 (after 0.3.3): as cloud-vsp 3
     "cloud-vsp": 4,   # ... by virtual sources on its local triangles (gegnn.fields.cloud_vsp); 2 (0.3.3): a
                       # point they leave apart continued along the graph, where it was inf; no value below the chord;
@@ -133,7 +134,7 @@ class FieldSpec:
         # 2026-11-26, gegnn.fields.landmarks.FPS_BATCH): not those of older caches
         # "-vsp": fields by virtual source propagation (meshes since 2026-11-27, clouds since 2026-11-28); the
         # heat method's names are unchanged
-        vsp = {"vsp": "-vsp", "exact": "-exact"}.get(self.solver, "")
+        vsp = {"vsp": "-vsp", "exact": "-exact", "paths": "-paths"}.get(self.solver, "")
         if self.cloud:
             return f"k{self.size}-cloud{self.cloud}-surface2" + vsp
         return f"k{self.size}" + (f"-rounds{FPS_BATCH}" if FPS_BATCH > 1 else "") + vsp

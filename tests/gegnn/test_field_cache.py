@@ -48,7 +48,8 @@ def test_specs_name_their_fields_and_read_a_models_config():
     assert FieldSpec.of(small_config(landmarks=64, points=8, landmark_fields="vsp")) == FieldSpec("landmark", 64, 8, "vsp")
     assert FieldSpec("landmark", 64, 8, "vsp").name == "k64-cloud8-surface2-vsp-v4"
     assert FieldSpec.of(small_config(landmarks=64, landmark_fields="exact")).name == "k64-rounds16-exact"
-    with pytest.raises(ValueError, match="landmark_fields must be one of heat, vsp, exact"):
+    assert FieldSpec.of(small_config(landmarks=64, landmark_fields="paths")).name == "k64-rounds16-paths"
+    with pytest.raises(ValueError, match="landmark_fields must be one of heat, vsp, exact, paths"):
         small_config(landmarks=64, landmark_fields="geodesic")
 
 
@@ -59,7 +60,7 @@ def test_fields_of_another_version_of_their_values_are_never_served(tmp_path, mo
     import gegnn.fields.cache as cache_module
 
     specs = {"heat": FieldSpec("landmark", 3), "vsp": FieldSpec("landmark", 3, 0, "vsp"),
-             "exact": FieldSpec("landmark", 3, 0, "exact"),
+             "exact": FieldSpec("landmark", 3, 0, "exact"), "paths": FieldSpec("landmark", 3, 0, "paths"),
              "cloud-heat": FieldSpec("landmark", 3, 8), "cloud-vsp": FieldSpec("landmark", 3, 8, "vsp"),
              "spectral": FieldSpec("spectral", 3)}
     assert {spec.values for spec in specs.values()} == set(FIELD_VERSIONS)

@@ -653,25 +653,34 @@ def test_landmarks_unchanged_from_potpourri3d_selection(monkeypatch):
     np.testing.assert_allclose(ours.distances, theirs.distances, rtol=0, atol=1e-6)
 
 
-def test_exact_landmark_fields_are_the_exact_solver_s_and_a_model_reads_them_by_name():
-    """fields="exact": each landmark's field is the exact solver's (a real shortest path at every vertex); the
-    shipped default reads them by name (embed's ``fields``), closer to the truth than its own vsp fields on a
-    torus; a solver it does not know is refused by name."""
+def test_exact_landmark_fields_are_the_exact_solver_s_and_a_model_reads_them_by_name(monkeypatch):
+    """fields="exact": each landmark's field is the exact solver's (a real shortest path at every vertex), on
+    any number of threads; fields="paths": its windows pruned within PATHS_TOLERANCE, never below exact and
+    within 0.1% of it on average. The shipped default reads both by name (embed's ``fields``), closer to the
+    truth than with its own vsp fields on a torus; a solver it does not know is refused by name."""
     from geodata._exact_geodesic import Surface
     from geodata.zoo import zoo_mesh
+
+    from gegnn import threads
 
     v, f = zoo_mesh("torus-r0.3", 0.3)
     got = landmark_fields(v, f, 8, fields="exact")
     expect = Surface(v, f.astype(np.int32)).distances(got.landmarks[0]).T
     np.testing.assert_allclose(got.distances, expect, rtol=1e-6)
+    monkeypatch.setattr(threads, "count", lambda: 3)
+    np.testing.assert_array_equal(landmark_fields(v, f, 8, fields="exact").distances, got.distances)
+    paths = landmark_fields(v, f, 8, fields="paths")
+    exact = Surface(v, f.astype(np.int32)).distances(paths.landmarks[0]).T.astype(np.float32)
+    ratio = paths.distances[exact > 0] / exact[exact > 0] - 1
+    assert ratio.min() > -1e-6 and 0 < ratio.mean() < 1e-3, (ratio.min(), ratio.mean())
     model = GeGnn.pretrained()
     sources = [0, len(v) // 2]
     truth = Surface(v, f.astype(np.int32)).distances(np.array(sources))
     errors = {}
-    for fields in (None, "exact"):
+    for fields in (None, "exact", "paths"):
         emb = model.embed(v, f, fields=fields)
         d = np.stack([emb.field(s) for s in sources])
         errors[fields] = float(np.mean(np.abs(d - truth)[truth > 0] / truth[truth > 0]))
-    assert errors["exact"] < 0.8 * errors[None], errors
+    assert errors["exact"] < 0.8 * errors[None] and errors["paths"] < 0.8 * errors[None], errors
     with pytest.raises(ValueError, match="fields='exakt'"):
         model.embed(v, f, fields="exakt")

@@ -234,3 +234,42 @@ def test_query_points_on_the_surface(soup, ckpt, tmp_path):
     assert r.exit_code != 0 and "bad.csv: expected three number columns x,y,z" in r.output
     r = runner.invoke(main, ["query", ckpt, path, "--points-file", str(tmp_path / "pts.csv"), "--source", "0"])
     assert r.exit_code != 0 and "one of --source, --pairs-file or --points-file" in r.output
+
+
+def test_fields_by_name_from_the_command_line(ckpt, tmp_path):
+    """--fields: query, pairwise and view embed with the landmark fields named, the same values as the API's
+    embed(..., fields=...), and say so; a model that reads no landmark fields, or --fields beside pairwise's
+    --exact, is a usage error."""
+    from geodata.zoo import zoo_mesh
+
+    v, f = zoo_mesh("torus-r0.3", 0.2)
+    path = tmp_path / "torus.obj"
+    trimesh.Trimesh(v, f, process=False).export(path)
+    qm = load_query_mesh(str(path))
+    model = GeGnn.pretrained()
+    runner = CliRunner()
+    fields = {}
+    for name in ("own", "paths"):
+        out = tmp_path / f"{name}.npy"
+        r = runner.invoke(main, ["query", "--pretrained", str(path), "--source", "3", "--fields", name, "-o", str(out)])
+        assert r.exit_code == 0, r.output
+        assert ("landmark fields by paths" in r.output) == (name == "paths")
+        emb = model.embed(qm.mesh.vertices, qm.mesh.faces, fields=None if name == "own" else name)
+        np.testing.assert_allclose(np.load(out), qm.to_file(emb.field(int(qm.vertices(3)))), rtol=1e-6)
+        fields[name] = np.load(out)
+    assert not np.allclose(fields["own"], fields["paths"], rtol=1e-4)
+    out = tmp_path / "D.npy"
+    r = runner.invoke(main, ["pairwise", "--pretrained", str(path), "--fields", "exact", "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    emb = model.embed(qm.mesh.vertices, qm.mesh.faces, fields="exact")
+    rows = qm.vertices(np.arange(qm.n_file_vertices))
+    np.testing.assert_allclose(np.load(out), emb.matrix()[np.ix_(rows, rows)], rtol=1e-5, atol=1e-6)
+    page = tmp_path / "v.html"
+    r = runner.invoke(main, ["view", "--pretrained", str(path), "--fields", "paths", "-o", str(page)])
+    assert r.exit_code == 0, r.output
+    assert "landmark fields by paths" in page.read_text()
+    for args in (["query", ckpt, str(path), "--source", "0", "--fields", "paths"],
+                 ["pairwise", "--pretrained", str(path), "--fields", "paths", "--exact", "-o", str(out)],
+                 ["query", "--pretrained", str(path), "--source", "0", "--fields", "exakt"]):
+        r = runner.invoke(main, args)
+        assert r.exit_code == 2 and "--fields" in r.output, r.output

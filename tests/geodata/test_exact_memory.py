@@ -65,3 +65,16 @@ def test_under_a_small_max_memory_the_child_refuses_with_the_estimate_instead_of
     mesh = sphere(6)  # 40,962 vertices: ~29 MiB estimated
     with pytest.raises(MeshError, match=r"geodesic: the exact solver would need ~.* GiB available"):
         run_isolated(lambda: geodesic_solver(mesh)(0), max_memory=8 << 20)
+
+
+def test_threads_are_as_many_as_the_memory_left_holds(monkeypatch):
+    """Each thread beyond the first needs its own wavefront (THREAD_SCALE bytes a vertex, with the margin): the
+    threads granted are those that fit beside one solve, at least 1, never more than asked for."""
+    from geodata.exact_memory import MEMORY_MARGIN, THREAD_SCALE, require_memory
+
+    n = 100_000
+    need, per_thread = exact_memory_estimate(n), MEMORY_MARGIN * THREAD_SCALE * n
+    for room, asked, granted in [(0, 8, 1), (per_thread - 1, 8, 1), (per_thread, 8, 2), (3.5 * per_thread, 8, 4),
+                                 (100 * per_thread, 8, 8), (100 * per_thread, 1, 1)]:
+        monkeypatch.setattr(exact_memory, "available_memory", lambda room=room: need + int(room))
+        assert require_memory(n, asked) == granted, (room, asked)
