@@ -6,8 +6,9 @@ random pairs, the whole distance matrix, and points inside faces.
 STORE is a validation store of `pipelines/pretrained/data.sh` (default data/val.zarr); --mesh picks the
 mesh (an id or a unique prefix of one; default dragon-4af53808, 5,224 vertices, the largest held-back one).
 Sections:
-  - queries: precomputation (landmark fields, network) and 1M random pairs, in fp32 and with precision
-    "auto", against the heat method for the same pairs (potpourri3d, one field per distinct source,
+  - queries: precomputation (landmark fields, network) and 1M random pairs, in fp32, with precision "auto"
+    and with the paths landmark fields (the model's error with them too), against the heat method for the same
+    pairs (potpourri3d, one field per distinct source,
     factorization included), against the torch path the compiled decode replaced, and on an AVX512 CPU
     against the compiled decode forced to AVX2; the model's error on the mesh's stored pairs.
   - matrix: the N x N matrix by the model (precomputation included), by the heat method's loop over
@@ -77,6 +78,8 @@ def section_queries(model, v, f, g, rows):
     pairs, dist = g["geodesic/pairs"][:].astype(np.int64), g["geodesic/distances"][:]
     error = mre(emb.distance(pairs[:, 0], pairs[:, 1]), dist)
     ours = embed + query
+    paths_embed, paths_emb = timed(lambda: model.embed(v, f, fields="paths"), repeat=1)
+    paths_error = mre(paths_emb.distance(pairs[:, 0], pairs[:, 1]), dist)
     rows += [
         (f"landmark fields ({k} fields, {solver}), part of the precomputation", fields, ""),
         ("precomputation: landmark fields + one forward pass (fp32)", embed, ""),
@@ -90,6 +93,9 @@ def section_queries(model, v, f, g, rows):
         (f"precomputation + 1M queries, precision auto (network {auto_emb_network(model)}, decoder "
          f"{auto_emb.precision})", auto_embed + auto_query, f"**{heat / (auto_embed + auto_query):.1f}x** the heat method"),
         (f"model error on this mesh's {len(pairs):,} stored pairs", None, f"{100 * error:.2f}%"),
+        ("precomputation with the paths landmark fields (embed fields=\"paths\") + 1M queries (fp32)",
+         paths_embed + query, f"**{heat / (paths_embed + query):.1f}x** the heat method; model error "
+         f"{100 * paths_error:.2f}%"),
     ]
     return heat / ours
 
