@@ -8,13 +8,18 @@ Three backends compute the same exact distances:
 - ``libigl``: libigl's ``exact_geodesic``, the same Kirsanov code: the reference the others are tested
   against (to 1e-9 relative).
 
-and one approximates them, for meshes too large for an exact solve of every source:
+and two approximate them, for meshes too large for an exact solve of every source:
 
+- ``paths``: vtp with its windows pruned wherever a real path is within PATHS_TOLERANCE (0.1%) of them, so
+  every value is still a real path's length, never below exact: 0.03-0.05% above it on average (0.25-0.34% at
+  a field's worst vertex), 1.5-4x faster than vtp (docs/benchmarks.md, the frontier).
 - ``vsp``: virtual source propagation (:mod:`geodata.approximate_geodesic`), 0.1-0.3% from exact on
-  average over the shape zoo and classic meshes (a few percent at a field's worst vertex), 6-8x faster than
-  vtp at 5k vertices and linear in the mesh. A store made with it names it in its parameters
-  (``geodesic_backend``), and each of its meshes records its error measured against vtp
-  (:func:`approximation_error`).
+  average over the shape zoo and classic meshes (a few percent at a field's worst vertex, and below exact
+  there where a path bends at a boundary or across noise), 6-8x faster than vtp at 5k vertices and linear in
+  the mesh.
+
+A store made with either names it in its parameters (``geodesic_backend``), and each of its meshes records its
+error measured against vtp (:func:`approximation_error`).
 
 Kirsanov's code segfaults on non-manifold input, so every call first checks the closed-manifold
 invariants; the same guard keeps the contract of the ``vtp`` solver, which is only tested on such meshes.
@@ -28,11 +33,12 @@ import numpy as np
 from geodata.exact_memory import require_memory
 from geodata.mesh import Mesh, MeshError, require_closed_manifold, vertex_components
 
-__all__ = ["BACKENDS", "APPROXIMATE", "geodesic_solver", "exact_geodesic_distances", "sample_sources",
+__all__ = ["BACKENDS", "APPROXIMATE", "PATHS_TOLERANCE", "geodesic_solver", "exact_geodesic_distances", "sample_sources",
            "exact_geodesic_pairs", "approximation_error", "PROBED_UP_TO", "polyline_length", "edge_flip_paths"]
 
-BACKENDS = ("vtp", "gdist", "libigl", "vsp")
-APPROXIMATE = ("vsp",)  # the approximate backends (their errors: the module docstring, docs/benchmarks.md)
+BACKENDS = ("vtp", "gdist", "libigl", "paths", "vsp")
+APPROXIMATE = ("paths", "vsp")  # the approximate backends (their errors: the module docstring, docs/benchmarks.md)
+PATHS_TOLERANCE = 1e-3  # the paths backend's window pruning, and the "paths" landmark fields' (gegnn.fields.landmarks)
 def geodesic_solver(mesh: Mesh, backend: str = "vtp") -> Callable[[int], np.ndarray]:
     """A function source -> exact geodesic distances (float64, (N,)) from that vertex to every vertex.
 
@@ -41,13 +47,14 @@ def geodesic_solver(mesh: Mesh, backend: str = "vtp") -> Callable[[int], np.ndar
     one-source vtp solve is estimated to need more memory than is available
     (:func:`geodata.exact_memory.require_memory`) is refused here, before anything is allocated, with MeshError("geodesic").
     """
-    if backend == "vtp":
+    if backend in ("vtp", "paths"):
         require_memory(mesh.n_vertices)
         from geodata._exact_geodesic import Surface
 
         surface = Surface(np.ascontiguousarray(mesh.vertices, dtype=np.float64),
                           np.ascontiguousarray(mesh.faces, dtype=np.int32))
-        return lambda source: surface.distances(np.array([source], dtype=np.int64))[0]
+        tolerance = PATHS_TOLERANCE if backend == "paths" else 0.0
+        return lambda source: surface.distances(np.array([source], dtype=np.int64), tolerance)[0]
     if backend == "gdist":
         import gdist
 
@@ -128,7 +135,7 @@ def sample_sources(labels: np.ndarray, n_pairs: int, rng: np.random.Generator) -
 
 def exact_geodesic_pairs(mesh: Mesh, n_pairs: int, rng: np.random.Generator, backend: str = "vtp"
                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Pairs (P, 2) uint32 and exact distances (P,) float32 (approximate with ``backend="vsp"``): sources x
+    """Pairs (P, 2) uint32 and exact distances (P,) float32 (approximate with ``backend`` "paths" or "vsp"): sources x
     every other vertex of their component.
 
     Sources come in the order of `sample_sources`. Kirsanov's code, rarely, leaves a vertex unreached

@@ -34,6 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from geodata.geodesic import PATHS_TOLERANCE
 from geodata.mesh import Mesh, label_groups, unique_edges, vertex_components
 
 from .. import threads
@@ -55,7 +56,6 @@ FPS_BATCH = 16  # landmarks chosen a round, their fields in one solve (module do
 TIE = 1e-9  # farthest-point ties: relative to the largest distance
 HEAT_MIN_VERTICES = 500  # below, or for fewer fields, potpourri3d's own solver is faster (its setup is)
 HEAT_MIN_FIELDS = 32
-PATHS_TOLERANCE = 1e-3  # the "paths" fields' window pruning (src/exact_geodesic.cpp; _paths_field: the ablation)
 SPLIT_PATHS_UP_TO = 256  # pinched vertices a part's fields pass through (_SplitVertexPaths: memory 8 N B each)
 SPLIT_CHUNK = 16  # copy fields _SplitVertexPaths solves at once
 SPLIT_BLOCK = 8192  # vertices it closes at once (temporaries of P x this floats)
