@@ -2,7 +2,7 @@
 exact solver's (``fields="exact"``): mean relative error of 10 fields to every vertex against exact, its worst
 vertex, and the embed's time, one torch thread.
 
-    python benchmarks/bench_exact_fields.py [SHAPE ...] [--write] [--tolerance T]  # geodata.zoo shapes (default: six)
+    python benchmarks/bench_exact_fields.py [SHAPE ...] [--write] [--tolerance T]  # geodata.zoo shapes (default: eight)
     python benchmarks/bench_exact_fields.py --store data/val.zarr [--write]  # a store's meshes and stored pairs
 
 With --store, the error is the validation MRE over each mesh's stored pairs (as training reports it), a mean row
@@ -94,4 +94,5 @@ if __name__ == "__main__":
         at = args.index("--tolerance")
         landmarks.PATHS_TOLERANCE = float(args[at + 1])
         del args[at:at + 2]
-    main(args or ["torus-r0.3", "u-bend", "genus-3-plate", "t-pipe", "slivers", "noisy"], "--write" in sys.argv)
+    main(args or ["torus-r0.3", "u-bend", "coil", "trefoil", "genus-3-plate", "t-pipe", "slivers", "noisy"],
+         "--write" in sys.argv)

@@ -4,7 +4,7 @@ and virtual source propagation (vsp, the shipped models' fields). Per mesh and s
 against exact, the largest value below exact (relative; a real-path solver has none beyond rounding), and ms a
 field, the least thread CPU time of two calls of 10 sources each, one thread.
 
-    python benchmarks/bench_field_frontier.py [--write]  # two classic meshes and six geodata.zoo shapes
+    python benchmarks/bench_field_frontier.py [--write]  # two classic meshes and eight geodata.zoo shapes
 
 --write puts the table into docs/benchmarks.md (benchmarks/results.py's write_table).
 """
@@ -19,8 +19,8 @@ from geodata.approximate_geodesic import ApproximateGeodesicSolver
 from geodata.zoo import zoo_mesh
 
 CLASSIC = ["max", "homer"]
-SHAPES = ["torus-r0.3", "u-bend", "genus-3-plate", "t-pipe", "slivers", "noisy"]
-TOLERANCES = (1e-4, 1e-3, 1e-2)
+SHAPES = ["torus-r0.3", "u-bend", "coil", "trefoil", "genus-3-plate", "t-pipe", "slivers", "noisy"]
+TOLERANCES = (1e-4, 3e-4, 1e-3, 1e-2)
 
 
 def load(name):

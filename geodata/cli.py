@@ -144,8 +144,8 @@ def main():
 @click.option("--geodesic-backend", type=click.Choice(BACKENDS_GEODESIC), default="vtp", show_default=True,
               help="Geodesic code: exact, all equal to 1e-9: vtp (this package's solver, the fastest), "
                    "gdist (tvb-gdist) or libigl (the reference); or approximate, for meshes too large for an exact "
-                   "solve of every source, each mesh recording its measured error: paths (vtp pruned within 0.1%: "
-                   "every value a real path's length, never below exact, 0.03-0.05% above it on average, 1.5-4x "
+                   "solve of every source, each mesh recording its measured error: paths (vtp pruned within 0.03%: "
+                   "every value a real path's length, never below exact, 0.005-0.05% above it on average, 1.2-4.5x "
                    "faster than vtp) or vsp (virtual source propagation, 0.1-0.3% from exact on average and a few "
                    "percent either way at a field's worst vertex, 6-8x faster than vtp at 5k vertices and linear in "
                    "the mesh). The store records it and refuses a run with another.")

@@ -10,9 +10,9 @@ Three backends compute the same exact distances:
 
 and two approximate them, for meshes too large for an exact solve of every source:
 
-- ``paths``: vtp with its windows pruned wherever a real path is within PATHS_TOLERANCE (0.1%) of them, so
-  every value is still a real path's length, never below exact: 0.03-0.05% above it on average (0.25-0.34% at
-  a field's worst vertex), 1.5-4x faster than vtp (docs/benchmarks.md, the frontier).
+- ``paths``: vtp with its windows pruned wherever a real path is within PATHS_TOLERANCE (0.03%) of them, so
+  every value is still a real path's length, never below exact: 0.005-0.05% above it on average (up to ~0.2%
+  at a field's worst vertex; thin tubes the most), 1.2-4.5x faster than vtp (docs/benchmarks.md, the frontier).
 - ``vsp``: virtual source propagation (:mod:`geodata.approximate_geodesic`), 0.1-0.3% from exact on
   average over the shape zoo and classic meshes (a few percent at a field's worst vertex, and below exact
   there where a path bends at a boundary or across noise), 6-8x faster than vtp at 5k vertices and linear in
@@ -38,7 +38,7 @@ __all__ = ["BACKENDS", "APPROXIMATE", "PATHS_TOLERANCE", "geodesic_solver", "exa
 
 BACKENDS = ("vtp", "gdist", "libigl", "paths", "vsp")
 APPROXIMATE = ("paths", "vsp")  # the approximate backends (their errors: the module docstring, docs/benchmarks.md)
-PATHS_TOLERANCE = 1e-3  # the paths backend's window pruning, and the "paths" landmark fields' (gegnn.fields.landmarks)
+PATHS_TOLERANCE = 3e-4  # the paths backend's window pruning, and the "paths" landmark fields' (gegnn.fields.landmarks)
 def geodesic_solver(mesh: Mesh, backend: str = "vtp") -> Callable[[int], np.ndarray]:
     """A function source -> exact geodesic distances (float64, (N,)) from that vertex to every vertex.
 

@@ -23,9 +23,9 @@ FIELDS_OPTION = click.option(
     "--fields", "landmark_fields", type=click.Choice(["own", *LANDMARK_FIELDS]), default="own", show_default=True,
     callback=lambda ctx, param, value: None if value == "own" else value,
     help="A landmark model's fields by another solver than the one it was trained on (own). paths: real "
-         "surface paths within 0.05% of exact; the default model answers about twice closer to the truth "
-         "(0.08-0.16% against 0.22-0.34% on the zoo), its embed 2-3x slower. exact: the exact solver's, the same "
-         "error at 3-12x the embed. Meshes only; docs/queries.md has the table.")
+         "surface paths within 0.05% of exact; the default model's error falls from 0.253% to 0.144% on the "
+         "validation meshes, its embed about 3x slower. exact: the exact solver's, the same error at about 6x the "
+         "embed. Meshes only; docs/queries.md has the table.")
 SIZE_OPTION = click.option("--size", default=480, show_default=True, help="Pixels across a rendered mesh (PNG).")
 PRETRAINED_HELP = ("Use a model shipped in the package instead of CHECKPOINT: the most accurate one, or NAME "
                    f"({', '.join(repr(name) for name in PRETRAINED)}).")

@@ -103,7 +103,7 @@ def landmark_fields(vertices, faces, k: int, seed: int = 0, t_coef: float = T_CO
             default FPS_BATCH).
         fields: ``"heat"`` (the shipped models' up to v2), ``"vsp"`` (0.1-0.3% from exact, ~2 ms a field
             at 5k vertices: :mod:`geodata.approximate_geodesic`), ``"exact"`` (the exact solver's, 3-10x a vsp
-            field's time: :func:`_exact_field`) or ``"paths"`` (real paths' lengths within 0.05% of exact, 2-4x a
+            field's time: :func:`_exact_field`) or ``"paths"`` (real paths' lengths within 0.05% of exact, 3-5x a
             vsp field's time: :func:`_paths_field`).
     """
     return landmark_solver(vertices, faces, k, t_coef, batch, fields)(seed)
@@ -299,10 +299,11 @@ def _exact_field(vertices, faces, t_coef: float, fields: int, tolerance: float =
 
 def _paths_field(vertices, faces, t_coef: float, fields: int):
     """``fields(sources) -> (N, len(sources))``: :func:`_exact_field` with its windows pruned within
-    PATHS_TOLERANCE of a real path: every value still a real path's length (never below exact), 0.03-0.05% above
-    exact on the zoo at 0.26-0.66x the exact solver's time; the shipped default reads them as well as exact
-    fields (docs/queries.md). Looser tolerances cost the model more than they save: 3e-3 takes it from 0.10% to
-    1.2% on a bent tube."""
+    PATHS_TOLERANCE of a real path: every value still a real path's length (never below exact), 0.005-0.05% above
+    exact on the zoo at 0.22-0.86x the exact solver's time; the shipped default reads them as well as exact
+    fields (docs/queries.md). Looser tolerances cost the model more than they save: the error grows with the
+    relays along a path, and at 1e-3 the model on a thin coil was at 0.28% (0.14% with exact fields or at 3e-4),
+    at 3e-3 on a bent tube at 1.2% (0.10%)."""
     return _exact_field(vertices, faces, t_coef, fields, PATHS_TOLERANCE)
 
 
