@@ -148,7 +148,7 @@ class GeGnn(nn.Module):
         and a cloud's row-wise steps are spread over the threads (:mod:`gegnn.threads`); the result is the
         same to the bit. ``fields``: a landmark model's fields by another solver than the one it was trained
         on (its config's ``landmark_fields``; None: those), e.g. ``"exact"``, the exact solver's: the ceiling of
-        the fields, at 3-10x a vsp field's time, or ``"paths"``, real paths within 0.05% of exact: the default
+        the fields, at 4-15x a vsp field's time, or ``"paths"``, real paths within 0.05% of exact: the default
         model as close to the truth as with exact fields, at about 3x its own embed's time (docs/queries.md).
 
         Returns:

@@ -120,7 +120,7 @@ def _blocks(ctx, param, value):
               help="The landmark fields' solver: the heat method (~1.9% from exact; the shipped landmark models "
                    "up to v2), virtual source propagation (vsp: 0.1-0.3% from exact, ~2 ms a field at 5k "
                    "vertices; a point-cloud model's on its points' local triangles), the exact solver (exact, "
-                   "meshes only: 3-10x a vsp field's time) or real paths within 0.05% of exact (paths, meshes "
+                   "meshes only: 4-15x a vsp field's time) or real paths within 0.05% of exact (paths, meshes "
                    "only: 3-5x a vsp field's time). A model reads the fields it was trained with.")
 @click.option("--landmark-no-embedding", is_flag=True, help="Ablation: the decoder reads landmarks only.")
 @click.option("--landmark-no-euclidean", is_flag=True, help="Ablation: drop the straight-line distance input.")

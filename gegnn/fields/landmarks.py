@@ -102,7 +102,7 @@ def landmark_fields(vertices, faces, k: int, seed: int = 0, t_coef: float = T_CO
         batch: landmarks chosen a round (:func:`batched_farthest_point_fields`; 1: sequential sampling;
             default FPS_BATCH).
         fields: ``"heat"`` (the shipped models' up to v2), ``"vsp"`` (0.1-0.3% from exact, ~2 ms a field
-            at 5k vertices: :mod:`geodata.approximate_geodesic`), ``"exact"`` (the exact solver's, 3-10x a vsp
+            at 5k vertices: :mod:`geodata.approximate_geodesic`), ``"exact"`` (the exact solver's, 4-15x a vsp
             field's time: :func:`_exact_field`) or ``"paths"`` (real paths' lengths within 0.05% of exact, 3-5x a
             vsp field's time: :func:`_paths_field`).
     """
@@ -270,7 +270,7 @@ def _along_edges(fields: np.ndarray, vertices: np.ndarray, edges: np.ndarray) ->
 
 def _exact_field(vertices, faces, t_coef: float, fields: int, tolerance: float = 0.0):
     """``fields(sources) -> (N, len(sources))``: exact polyhedral geodesics, geodata's window-propagation solver
-    (``vtp``), every value a shortest path's length; 3-10x a vsp field's time (docs/benchmarks.md), the sources
+    (``vtp``), every value a shortest path's length; 4-15x a vsp field's time (docs/benchmarks.md), the sources
     on torch's threads (:mod:`gegnn.threads`), each with its own wavefront. ``tolerance`` > 0: windows pruned
     within that relative factor of a real path (:func:`_paths_field`). A part it is not made for (an edge of
     three or more faces, a pinched vertex) or too large for the memory available gets the vsp fields of
