@@ -6,9 +6,10 @@ import dataclasses
 import json
 from dataclasses import dataclass
 
-__all__ = ["GeGnnConfig", "LANDMARK_FIELDS"]
+__all__ = ["GeGnnConfig", "LANDMARK_FIELDS", "MESH_FIELDS"]
 
 LANDMARK_FIELDS = ("heat", "vsp", "exact", "paths")  # the landmark fields' solvers (gegnn.fields.landmarks)
+MESH_FIELDS = ("exact", "paths")  # those that need a mesh's faces (the exact solver's)
 
 
 @dataclass(frozen=True)
@@ -64,7 +65,7 @@ class GeGnnConfig:
             raise ValueError(f"landmark_output must be 'ratio' or 'interval', got {self.landmark_output!r}")
         if self.landmark_fields not in LANDMARK_FIELDS:
             raise ValueError(f"landmark_fields must be one of {', '.join(LANDMARK_FIELDS)}, got {self.landmark_fields!r}")
-        if self.points and self.landmark_fields in ("exact", "paths"):
+        if self.points and self.landmark_fields in MESH_FIELDS:
             raise ValueError(f"{self.landmark_fields} landmark fields need a mesh; a point-cloud model reads heat or "
                              f"vsp fields")
         if self.landmarks < 0 or self.spectral < 0:

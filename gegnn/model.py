@@ -15,7 +15,7 @@ from geodata.mesh import Mesh, unique_edges, vertex_normals
 from geodata.stages.normalize import normalization
 
 from .checkpoint import load_checkpoint, save_checkpoint
-from .config import LANDMARK_FIELDS, GeGnnConfig
+from .config import LANDMARK_FIELDS, MESH_FIELDS, GeGnnConfig
 from .decoders import DistanceDecoder, LandmarkDecoder, SpectralDecoder
 from .fields.cache import FieldSpec
 from .graph import Graph, mesh_graph
@@ -181,7 +181,7 @@ class GeGnn(nn.Module):
         """One forward pass with the network in ``precision`` ("fp32" or "bf16"); the embedding's decoder
         gets the ``requested`` precision to resolve; ``fields``: :meth:`embed`'s."""
         if fields is not None and (fields not in LANDMARK_FIELDS or not self.config.landmarks or self.config.points
-                                   or (fields in ("exact", "paths") and faces is None)):
+                                   or (fields in MESH_FIELDS and faces is None)):
             raise ValueError(f"fields={fields!r}: a mesh landmark model reads fields by one of "
                              f"{', '.join(LANDMARK_FIELDS)}; this model has {self.config.landmarks} landmarks"
                              f"{' on point clouds' if self.config.points else ''}")

@@ -134,10 +134,10 @@ class FieldSpec:
         # 2026-11-26, gegnn.fields.landmarks.FPS_BATCH): not those of older caches
         # "-vsp": fields by virtual source propagation (meshes since 2026-11-27, clouds since 2026-11-28); the
         # heat method's names are unchanged
-        vsp = {"vsp": "-vsp", "exact": "-exact", "paths": "-paths"}.get(self.solver, "")
+        by = "" if self.solver == "heat" else f"-{self.solver}"  # "-vsp", "-exact", "-paths"
         if self.cloud:
-            return f"k{self.size}-cloud{self.cloud}-surface2" + vsp
-        return f"k{self.size}" + (f"-rounds{FPS_BATCH}" if FPS_BATCH > 1 else "") + vsp
+            return f"k{self.size}-cloud{self.cloud}-surface2" + by
+        return f"k{self.size}" + (f"-rounds{FPS_BATCH}" if FPS_BATCH > 1 else "") + by
 
     def compute(self, vertices: np.ndarray, faces: np.ndarray, seed: int = 0) -> np.ndarray:
         """The fields of one mesh, float32 (N, K) or (N, m + 1); for a point-cloud model, of its vertices as
